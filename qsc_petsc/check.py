@@ -1,0 +1,35 @@
+"""`qsc check`: validate a scene, build and distribute its mesh, and report what a run would model."""
+
+import numpy as np
+from mpi4py import MPI
+
+from .mesh import distribute_mesh
+
+
+def check(scene, comm):
+    """Collective; returns the report text (meaningful on rank 0)."""
+    mesh = distribute_mesh(scene, comm)
+    cells = comm.gather(len(mesh.cells), root=0)
+    owned = comm.gather(int(mesh.owned.sum()), root=0)
+    ghosts = comm.gather(int((~mesh.owned).sum()), root=0)
+    surfaces = {}
+    for name in mesh.surface_names:
+        c, _ = mesh.surface_faces(name)
+        surfaces[name] = comm.allreduce(len(c), op=MPI.SUM)
+    bodies = [comm.allreduce(int(np.sum(mesh.cell_body == b)), op=MPI.SUM) for b in range(len(mesh.body_names))]
+    from .contact.model import contact_plan
+    plan = contact_plan(mesh, scene)
+    mesh.dm.destroy()
+    if comm.rank != 0:
+        return ""
+    lines = [f"scene {scene.name}: valid",
+             f"mesh: {mesh.n_cells} {mesh.cell_type} cells, {mesh.n_vertices} vertices, {3 * mesh.n_vertices} dofs",
+             "bodies: " + ", ".join(f"{n} ({c} cells)" for n, c in zip(mesh.body_names, bodies)),
+             "surfaces: " + ", ".join(f"{n} ({k} faces)" for n, k in surfaces.items()),
+             f"partition over {comm.size} rank(s):"]
+    for r in range(comm.size):
+        lines.append(f"  rank {r}: {cells[r]} cells, {3 * owned[r]} owned dofs, {ghosts[r]} ghost vertices")
+    lines.append(f"  balance (max/mean owned dofs): {max(owned) / max(np.mean(owned), 1):.3f}")
+    lines.append(f"load steps: {scene.load.steps}; boundary conditions: {len(scene.boundary)}")
+    lines.extend(plan)
+    return "\n".join(lines)

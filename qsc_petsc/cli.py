@@ -1,0 +1,85 @@
+"""The qsc command: run, check and --version; PETSc options pass through to the options database."""
+
+import argparse
+import sys
+import traceback
+
+from .options import init_petsc, split_petsc_args
+
+EXIT_INPUT, EXIT_SOLVE, EXIT_BUG = 2, 3, 1
+
+
+def build_parser():
+    p = argparse.ArgumentParser(
+        prog="qsc", description="Parallel contact between deformable bodies with non-matching meshes. "
+        "PETSc options (e.g. -qsc_ksp_monitor, -qsc_pc_type lu) may follow the scene.")
+    p.add_argument("--version", action="store_true", help="print qsc_petsc, PETSc, petsc4py and MPI versions")
+    sub = p.add_subparsers(dest="command")
+    for name, text in (("run", "solve a scene and write results"),
+                       ("check", "validate a scene and print mesh and partition statistics, no solve")):
+        s = sub.add_parser(name, help=text, description=text)
+        s.add_argument("scene", help="scene file (TOML)")
+        s.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE",
+                       help="override a scene value, e.g. bodies.0.mesh.cells=[8,8,8] (repeatable)")
+        if name == "run":
+            s.add_argument("--out", help="output folder (default: the scene's output.directory)")
+    return p
+
+
+def versions():
+    from mpi4py import MPI
+    import petsc4py
+    from petsc4py import PETSc
+    from . import __version__
+    return (f"qsc_petsc {__version__}\nPETSc {'%d.%d.%d' % PETSc.Sys.getVersion()}\n"
+            f"petsc4py {petsc4py.__version__}\nMPI {MPI.Get_library_version().splitlines()[0].strip()} "
+            f"(mpi4py {__import__('mpi4py').__version__})")
+
+
+def main(argv=None):
+    own, petsc_args = split_petsc_args(sys.argv[1:] if argv is None else argv)
+    args = build_parser().parse_args(own)
+    init_petsc(petsc_args)
+    from mpi4py import MPI
+    comm = MPI.COMM_WORLD
+    say = print if comm.rank == 0 else (lambda *a, **k: None)
+    if args.version:
+        say(versions())
+        return 0
+    if args.command is None:
+        build_parser().print_help()
+        return EXIT_INPUT
+    from .errors import ConvergenceError, QscError
+    try:
+        from .scene import load_scene
+        scene = load_scene(args.scene, args.set)
+        if args.command == "check":
+            from .check import check
+            say(check(scene, comm))
+            return 0
+        from .run import Run
+        run = Run(scene, comm, args.out, log=say)
+        say(f"qsc: {scene.name}: {run.summary['mesh']['dofs']} dofs on {comm.size} rank(s), "
+            f"results in {run.out}")
+        summary = run.execute()
+        say(f"qsc: done in {sum(summary['time'].values()):.2f} s; results in {run.out}")
+        run.destroy()
+        return 0
+    except ConvergenceError as exc:
+        say(f"qsc: solve failed: {exc}")
+        return EXIT_SOLVE
+    except QscError as exc:
+        say(f"qsc: error: {exc}")
+        return EXIT_INPUT
+    except Exception:                               # a bug: never leave other ranks waiting
+        sys.stderr.write(f"[rank {comm.rank}] internal error:\n{traceback.format_exc()}")
+        sys.stderr.flush()
+        comm.Abort(EXIT_BUG)
+
+
+def entry():
+    sys.exit(main())
+
+
+if __name__ == "__main__":
+    entry()

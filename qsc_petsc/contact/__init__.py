@@ -1,0 +1,1 @@
+"""Node-to-segment contact: search, projection, constraint rows, penalty, and their parallel assembly."""

@@ -1,0 +1,369 @@
+"""Contact in parallel: surface data across ranks, face exchange, both search passes, distributed G, g, W, and reports.
+
+Each rank searches for the surface nodes it owns. The opposite surface's faces it may need
+(bounding boxes within the search distance of its nodes) come from the other ranks in one
+all-to-all. Rows are triplets with global ids assembled by their owners; a quasi-symmetric
+row of slave node k can receive contributions computed on the rank that owns a master node l.
+At solve time the product G^T m (ConstraintTerm.add_force) is the halo exchange of slave
+multipliers: PETSc scatters row multipliers to the ranks owning the master dofs they act on.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from .. import assembly, fem
+from ..errors import SceneError
+from ..solver import ConstraintTerm
+from . import rows as row_builders
+from .penalty import gate_positions
+from .search import closest_faces
+
+
+@dataclass
+class Surface:
+    """One named surface on this rank: its local faces and assembled nodal data of its owned nodes."""
+    name: str
+    body: int
+    faces: np.ndarray          # (k, nv) local vertex indices of the local faces
+    nodes: np.ndarray          # owned local vertices on the surface
+    area: np.ndarray           # tributary area int N_k ds of each owned node [m^2]
+    size: np.ndarray           # area-weighted mean size of the faces around each owned node [m]
+    normal: np.ndarray         # area-weighted outward unit normal at each owned node
+    mean_size: float           # mean face size over the whole surface (all ranks) [m]
+    total_area: float
+
+
+def _owned_rows(mesh, v):
+    """Positions of owned local vertices v in an owned dof-array, reshaped (n_owned, 3)."""
+    return mesh.gvert[v] - mesh.vertex_range[0]
+
+
+def surface_data(mesh, name, template):
+    """Faces and nodal area, size and normal of a surface, assembled over ranks."""
+    comm = mesh.comm
+    c, lf = mesh.surface_faces(name)
+    faces = mesh.face_nodes(c, lf)
+    body = int(mesh.cell_body[c[0]]) if len(c) else -1
+    body = comm.allreduce(body, op=MPI.MAX)
+    xf = mesh.coords[faces]
+    nodal = fem.face_nodal_areas(mesh.face_type, xf) if len(faces) else np.zeros((0, faces.shape[1]))
+    size = fem.face_size(xf) if len(faces) else np.zeros(0)
+    normal, _ = fem.face_normals(mesh.face_type, xf, fem.CENTROID[mesh.face_type][None, :])
+    acc = template.duplicate()
+    acc_n = template.duplicate()
+    for vec in (acc, acc_n):
+        vec.set(0.0)
+    dofs = 3 * mesh.gvert[faces]
+    acc.setValues(dofs.ravel().astype(PETSc.IntType), nodal.ravel(), addv=PETSc.InsertMode.ADD_VALUES)
+    acc.setValues((dofs + 1).ravel().astype(PETSc.IntType), (nodal * size[:, None]).ravel(),
+                  addv=PETSc.InsertMode.ADD_VALUES)
+    ndofs = (dofs[:, :, None] + np.arange(3)).ravel().astype(PETSc.IntType)
+    acc_n.setValues(ndofs, (nodal[:, :, None] * normal[:, 0, None, :]).ravel(), addv=PETSc.InsertMode.ADD_VALUES)
+    acc.assemble()
+    acc_n.assemble()
+    nodes = mesh.surface_vertices(name)
+    nodes = nodes[mesh.owned[nodes]]
+    pos = _owned_rows(mesh, nodes)
+    a = acc.getArray().reshape(-1, 3)[pos]
+    nvec = acc_n.getArray().reshape(-1, 3)[pos]
+    acc.destroy()
+    acc_n.destroy()
+    area = a[:, 0]
+    keep = area > 0                       # a labelled vertex that touches the surface only elsewhere
+    nodes, area, a, nvec = nodes[keep], area[keep], a[keep], nvec[keep]
+    nrm = np.linalg.norm(nvec, axis=1)
+    total_size = comm.allreduce(float(size.sum()), op=MPI.SUM)
+    count = comm.allreduce(len(size), op=MPI.SUM)
+    return Surface(name, body, faces, nodes, area, a[:, 1] / area, nvec / np.where(nrm > 0, nrm, 1.0)[:, None],
+                   total_size / max(count, 1), comm.allreduce(float(nodal.sum()), op=MPI.SUM))
+
+
+def exchange_faces(mesh, faces, X, U, sizes, need_lo, need_hi):
+    """Every rank's faces (local vertex lists) whose boxes meet another rank's need box go there.
+
+    need_lo/need_hi: this rank's box of points, already inflated by the search radius.
+    Returns (face_gvert, face_orig, face_X, face_U, face_size) of local and received faces."""
+    comm = mesh.comm
+    nv = faces.shape[1]
+    boxes = comm.allgather((need_lo, need_hi))
+    xyz = X[faces] + U[faces]
+    fmin, fmax = (xyz.min(axis=1), xyz.max(axis=1)) if len(faces) else (np.zeros((0, 3)), np.zeros((0, 3)))
+    packet = np.concatenate([mesh.gvert[faces], mesh.vert_orig[faces], X[faces].reshape(-1, 3 * nv),
+                             U[faces].reshape(-1, 3 * nv), sizes[:, None]], axis=1).astype(float)
+    send, counts = [], np.zeros(comm.size, dtype=np.int64)
+    for r, (lo, hi) in enumerate(boxes):
+        if r == comm.rank or lo is None:
+            continue
+        hit = np.all((fmax >= lo) & (fmin <= hi), axis=1)
+        send.append(packet[hit])
+        counts[r] = hit.sum()
+    width = packet.shape[1]
+    sendbuf = np.concatenate(send) if send else np.zeros((0, width))
+    rcounts = np.empty_like(counts)
+    comm.Alltoall(counts, rcounts)
+    recv = np.empty((int(rcounts.sum()), width))
+    comm.Alltoallv([sendbuf, (counts * width, None), MPI.DOUBLE], [recv, (rcounts * width, None), MPI.DOUBLE])
+    allp = np.concatenate([packet, recv])
+    gv = allp[:, :nv].astype(np.int64)
+    orig = allp[:, nv:2 * nv].astype(np.int64)
+    fx = allp[:, 2 * nv:5 * nv].reshape(-1, nv, 3)
+    fu = allp[:, 5 * nv:8 * nv].reshape(-1, nv, 3)
+    return gv, orig, fx, fu, allp[:, -1]
+
+
+def project_pass(mesh, S, T, X, U, radius):
+    """Owned nodes of S projected on faces of T (local and gathered): a rows.Pass, the found mask, the search."""
+    pts = X[S.nodes] + U[S.nodes]
+    if len(pts):
+        lo, hi = pts.min(axis=0) - radius, pts.max(axis=0) + radius
+    else:
+        lo = hi = None
+    tsize = fem.face_size(mesh.coords[T.faces]) if len(T.faces) else np.zeros(0)
+    gv, orig, fx, fu, fsize = exchange_faces(mesh, T.faces, X, U, tsize, lo, hi)
+    found = closest_faces(pts, fx + fu, mesh.face_type, np.sort(orig, axis=1), radius)
+    ok = found["face"] >= 0
+    f = found["face"][ok]
+    # the search ran on the current configuration; the rows are linear in the total displacement,
+    # so the gap at u = 0 is measured between the reference positions of the same material points
+    N = found["shape"][ok]
+    x_target = np.einsum("pv,pvi->pi", N, fx[f])
+    delta0 = np.einsum("pi,pi->p", X[S.nodes[ok]] - x_target, found["normal"][ok])
+    pss = row_builders.Pass(node=mesh.gvert[S.nodes[ok]], area=S.area[ok], size=S.size[ok],
+                            target_nodes=gv[f], shape=N, normal=found["normal"][ok], delta0=delta0,
+                            target_size=fsize[f])
+    return pss, ok, found
+
+
+def contact_pairs_data(mesh, scene, template):
+    """Surfaces, penalty scale and search radius of every contact pair."""
+    pairs = []
+    for i, pair in enumerate(scene.contact):
+        S = surface_data(mesh, pair.slave, template)
+        M = surface_data(mesh, pair.master, template)
+        E = min(scene.bodies[S.body].material.youngs_modulus, scene.bodies[M.body].material.youngs_modulus)
+        h_eff = min(S.mean_size, M.mean_size)
+        pairs.append({"index": i, "spec": pair, "slave": S, "master": M, "h_eff": h_eff,
+                      "eps_n": pair.penalty * E / h_eff, "radius": pair.search_distance * h_eff})
+    return pairs
+
+
+def die_data(mesh, scene, template):
+    dies = []
+    for i, die in enumerate(scene.die):
+        surfaces = [surface_data(mesh, s, template) for s in die.surfaces]
+        nodes = np.concatenate([s.nodes for s in surfaces])
+        area = np.concatenate([s.area for s in surfaces])
+        nodes, first = np.unique(nodes, return_index=True)
+        h = min(s.mean_size for s in surfaces)
+        E = min(scene.bodies[s.body].material.youngs_modulus for s in surfaces)
+        dies.append({"index": i, "spec": die, "nodes": nodes, "area": area[first], "h": h,
+                     "eps_n": die.penalty * E / h, "radius": die.search_distance * h,
+                     "total_area": sum(s.total_area for s in surfaces)})
+    return dies
+
+
+class ContactModel:
+    """Builds the constraint terms of every contact pair and die at each search, and reports on them."""
+
+    def __init__(self, mesh, scene, template, phases=None):
+        self.mesh, self.scene, self.comm = mesh, scene, mesh.comm
+        self.template = template
+        self.phases = phases
+        self.pairs = contact_pairs_data(mesh, scene, template)
+        self.dies = die_data(mesh, scene, template)
+        self.current = []
+        self.t = 0.0
+
+    def _phase(self, name):
+        from contextlib import nullcontext
+        return self.phases(name) if self.phases else nullcontext()
+
+    def local_displacement(self, u):
+        dm = self.mesh.dm
+        ul = dm.createLocalVec()
+        dm.globalToLocal(u, ul)
+        arr = ul.getArray().reshape(-1, 3).copy()
+        ul.destroy()
+        return arr
+
+    def _term(self, name, rows, eps_n, h, augmented):
+        mesh = self.mesh
+        G = assembly.triplet_matrix(mesh, rows.G_rows, rows.G_cols, rows.G_vals)
+        g = assembly.row_vector(mesh, rows.g_rows, rows.g_vals, self.template)
+        W = assembly.row_vector(mesh, rows.W_rows, rows.W_vals, self.template)
+        r0 = self.template.getOwnershipRange()[0]
+        w = W.getArray()
+        closed = self.scene.solver.active_set_tolerance * w * h
+        gate = None
+        if len(rows.gate_rows):
+            ids = np.arange(len(w)) + r0
+            gate = gate_positions(ids, rows.gate_rows, rows.gate_of)
+        term = ConstraintTerm(name, G, g, W, rows.phi, eps_n, closed[w > 0], gate, augmented)
+        if gate is not None:
+            # gate positions refer to the full local row array; the term works on existing rows only
+            pos = np.full(len(w), -1)
+            pos[term.rows] = np.arange(len(term.rows))
+            g_of = gate[term.rows]
+            term.gate_of = np.where(g_of >= 0, pos[np.maximum(g_of, 0)], -1)
+        return term
+
+    def terms(self, u, t):
+        """New search at the current displacement u, load factor t: one ConstraintTerm per pair and die."""
+        for term in self.current:
+            term.G.destroy()
+        mesh = self.mesh
+        U = self.local_displacement(u)
+        X = mesh.coords
+        self.t = t
+        out = []
+        for pd in self.pairs:
+            spec = pd["spec"]
+            with self._phase("search"):
+                sp, _, _ = project_pass(mesh, pd["slave"], pd["master"], X, U, pd["radius"])
+                mp = None
+                if spec.formulation != "master_slave":
+                    mp, _, _ = project_pass(mesh, pd["master"], pd["slave"], X, U, pd["radius"])
+            self._check_found(pd, sp, mp)
+            with self._phase("rows"):
+                if spec.formulation == "master_slave":
+                    rows = row_builders.master_slave(sp)
+                elif spec.formulation == "two_pass":
+                    rows = row_builders.two_pass(sp, mp)
+                else:
+                    rows = row_builders.quasi_symmetric(sp, mp, spec.weight)
+                out.append(self._term(f"contact[{pd['index']}]", rows, pd["eps_n"], pd["h_eff"],
+                                      spec.enforcement == "augmented_lagrangian"))
+        for dd in self.dies:
+            spec = dd["spec"]
+            with self._phase("rows"):
+                n = np.asarray(spec.normal, dtype=float)
+                u_die = t * np.asarray(spec.motion, dtype=float)
+                v = dd["nodes"]
+                gap = (X[v] + U[v] - np.asarray(spec.point) - u_die) @ n
+                near = gap <= dd["radius"]
+                rows = row_builders.die_rows(mesh.gvert[v[near]], dd["area"][near], X[v[near]], spec.point, n,
+                                             u_die, spec.condition == "sticking")
+                out.append(self._term(f"die[{dd['index']}]", rows, dd["eps_n"], dd["h"], False))
+        self.current = out
+        return out
+
+    def _check_found(self, pd, sp, mp):
+        """Surfaces declared in contact must meet within the search distance somewhere (all ranks agree)."""
+        found = self.comm.allreduce(len(sp.node) + (len(mp.node) if mp is not None else 0), op=MPI.SUM)
+        if found == 0:
+            spec = pd["spec"]
+            raise SceneError(f"contact[{pd['index']}]: no node of {spec.slave!r} or {spec.master!r} is within the "
+                             f"search distance ({pd['radius']:.3g} m = search_distance x element size) of the "
+                             f"other surface; increase contact[{pd['index']}].search_distance or check the geometry")
+
+    def add_forces(self, u, r):
+        """r += sum of G^T m over all terms at u (for reactions)."""
+        for term in self.current:
+            term.evaluate(u)
+            term.add_force(r)
+
+    def report(self, u, U):
+        """Point fields (traction, penetration, status on contact nodes) and per pair/die summaries."""
+        mesh = self.mesh
+        nvl = len(mesh.coords)
+        traction = np.zeros((nvl, 1))
+        penetration = np.zeros((nvl, 1))
+        status = np.full((nvl, 1), -1.0)
+        X = mesh.coords
+        summaries = {}
+        terms = {t.name: t for t in self.current}
+        for pd in self.pairs:
+            term = terms[f"contact[{pd['index']}]"]
+            term.evaluate(u)
+            fc = u.duplicate()
+            fc.set(0.0)
+            term.add_force(fc)
+            F = fc.getArray().reshape(-1, 3)
+            entry = {"rows": self.comm.allreduce(len(term.rows), op=MPI.SUM),
+                     "active_rows": self.comm.allreduce(int(term.active.sum()), op=MPI.SUM),
+                     "eps_n": pd["eps_n"], "h_eff": pd["h_eff"]}
+            W = term.W.getArray()[term.rows]
+            entry["contact_area"] = self.comm.allreduce(float(term.phi * W[term.active].sum()), op=MPI.SUM)
+            mean_pen = {}
+            for side, S, T in (("slave", pd["slave"], pd["master"]), ("master", pd["master"], pd["slave"])):
+                _, ok, found = project_pass(mesh, S, T, X, U, pd["radius"])
+                v = S.nodes[ok]
+                h = -found["signed_gap"][ok]          # penetration in the current configuration
+                p_own = np.einsum("pi,pi->p", F[_owned_rows(mesh, S.nodes)], S.normal) / S.area
+                traction[S.nodes, 0] = p_own
+                penetration[v, 0] = h
+                st = np.zeros(len(v))
+                st[h >= -self.scene.solver.active_set_tolerance * pd["h_eff"]] = 1.0
+                status[v, 0] = st
+                force = self.comm.allreduce(-F[_owned_rows(mesh, S.nodes)].sum(axis=0), op=MPI.SUM)
+                entry[f"max_penetration_{side}"] = self.comm.allreduce(float(h.max(initial=-np.inf)), op=MPI.MAX)
+                a = S.area[ok]
+                mean_pen[side] = (self.comm.allreduce(float((a * h).sum()), op=MPI.SUM),
+                                  self.comm.allreduce(float(a.sum()), op=MPI.SUM))
+                entry[f"force_on_{side}"] = force.tolist()
+                if side == "slave":
+                    entry["total_normal_force"] = self.comm.allreduce(float((p_own * S.area).sum()), op=MPI.SUM)
+            ms = mean_pen["slave"][0] / max(mean_pen["slave"][1], 1e-300)
+            mm = mean_pen["master"][0] / max(mean_pen["master"][1], 1e-300)
+            entry["mean_penetration_slave"], entry["mean_penetration_master"] = ms, mm
+            entry["swap_indicator"] = abs(ms - mm) / max(abs(ms), abs(mm), 1e-300)
+            summaries[f"contact[{pd['index']}] {pd['spec'].slave} / {pd['spec'].master}"] = entry
+            fc.destroy()
+        for dd in self.dies:
+            term = terms[f"die[{dd['index']}]"]
+            term.evaluate(u)
+            fc = u.duplicate()
+            fc.set(0.0)
+            term.add_force(fc)
+            F = fc.getArray().reshape(-1, 3)
+            force = self.comm.allreduce(-F[_owned_rows(mesh, dd["nodes"])].sum(axis=0), op=MPI.SUM)
+            spec = dd["spec"]
+            n = np.asarray(spec.normal)
+            v = dd["nodes"]
+            h = -((X[v] + U[v]) - np.asarray(spec.point) - self.t * np.asarray(spec.motion)) @ n
+            penetration[v, 0] = h
+            status[v, 0] = (h >= -self.scene.solver.active_set_tolerance * dd["h"]).astype(float)
+            traction[v, 0] = (F[_owned_rows(mesh, v)] @ -n) / dd["area"]
+            summaries[f"die[{dd['index']}] {spec.name}"] = {
+                "rows": self.comm.allreduce(len(term.rows), op=MPI.SUM),
+                "active_rows": self.comm.allreduce(int(term.active.sum()), op=MPI.SUM),
+                "eps_n": dd["eps_n"], "force_on_bodies": force.tolist(),
+                "max_penetration": self.comm.allreduce(float(h.max(initial=-np.inf)), op=MPI.MAX),
+                "contact_area": self.comm.allreduce(float(term.W.getArray()[term.rows][term.active].sum()),
+                                                    op=MPI.SUM)}
+            fc.destroy()
+        fields = {"contact_traction": traction, "contact_penetration": penetration, "contact_status": status}
+        return fields, summaries
+
+    def destroy(self):
+        for term in self.current:
+            term.G.destroy()
+        self.current = []
+
+
+def contact_plan(mesh, scene):
+    """Lines for `qsc check`: what each contact pair and die will model (rows at the start)."""
+    if not (scene.contact or scene.die):
+        return ["contact: none (no contact search)"]
+    template = PETSc.Vec().createMPI((3 * int(mesh.owned.sum()), 3 * mesh.n_vertices), comm=mesh.comm)
+    template.set(0.0)
+    model = ContactModel(mesh, scene, template)
+    terms = model.terms(template, 0.0)
+    lines = []
+    for pd, term in zip(model.pairs, terms):
+        spec = pd["spec"]
+        rows = mesh.comm.allreduce(len(term.rows), op=MPI.SUM)
+        lines.append(f"contact[{pd['index']}]: {spec.slave} (slave) / {spec.master} (master), {spec.formulation}, "
+                     f"{spec.enforcement}; h_eff {pd['h_eff']:.4g} m, eps_n {pd['eps_n']:.4g} Pa/m, "
+                     f"search radius {pd['radius']:.4g} m; {rows} candidate rows at the start")
+    for dd, term in zip(model.dies, terms[len(model.pairs):]):
+        spec = dd["spec"]
+        rows = mesh.comm.allreduce(len(term.rows), op=MPI.SUM)
+        lines.append(f"die[{dd['index']}] {spec.name}: rigid plane, {spec.condition}, on {', '.join(spec.surfaces)}; "
+                     f"eps_n {dd['eps_n']:.4g} Pa/m; {rows} candidate rows at the start")
+    model.destroy()
+    template.destroy()
+    return lines

@@ -1,0 +1,254 @@
+"""Constraint rows C_r = G_r . u - g_r and weights W_r of each contact formulation, as triplets with global ids.
+
+Pure NumPy (formulation.md sections 3 and 7). A "pass" integrates surface S
+against surface T with nodal quadrature: each projected S node k gives
+A_k h_k with the penetration
+
+    h_k = -(u_S^k - sum_j N_j(xi) u_T^j) . n_T - delta0_k,
+
+n_T the T face's own outward normal at xi, frozen between two searches. The
+row of a node constraint of vertex v is dof 3 v (component slot 0); sticking
+die rows also use 3 v + 1 and 3 v + 2. The caller adds the triplets into a
+distributed matrix (duplicates are summed), so rows may belong to any rank.
+"""
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+_I = np.int64
+
+
+def _ints(n=0):
+    return np.zeros(n, dtype=_I)
+
+
+@dataclass
+class Rows:
+    """Triplets of G (rows x dofs), g and W (by row) and the factor phi of one contact formulation.
+
+    Rows listed in gate_rows are equalities active iff the row gate_of (same
+    position) is active; all other rows are inequalities <C_r>_+.
+    """
+    G_rows: np.ndarray
+    G_cols: np.ndarray
+    G_vals: np.ndarray
+    g_rows: np.ndarray
+    g_vals: np.ndarray
+    W_rows: np.ndarray
+    W_vals: np.ndarray
+    phi: float
+    gate_rows: np.ndarray = field(default_factory=_ints)
+    gate_of: np.ndarray = field(default_factory=_ints)
+
+    @staticmethod
+    def empty(phi=1.0):
+        z = np.zeros(0)
+        return Rows(_ints(), _ints(), z, _ints(), z, _ints(), z, float(phi))
+
+    def with_unit_phi(self):
+        """The same constraints with phi folded into G, g and W (phi = 1).
+
+        Scaling C_r and W_r by phi leaves the multipliers eps <C_r>_+ / W_r, the
+        penalty energy, force and Jacobian, and sum phi W unchanged.
+        """
+        s = float(self.phi)
+        return Rows(self.G_rows, self.G_cols, s * self.G_vals, self.g_rows, s * self.g_vals,
+                    self.W_rows, s * self.W_vals, 1.0, self.gate_rows, self.gate_of)
+
+    @staticmethod
+    def concat(a, b):
+        """Rows of a and b together; if their phi differ, phi is first folded into each (with_unit_phi)."""
+        if a.phi != b.phi:
+            a, b = a.with_unit_phi(), b.with_unit_phi()
+        cat = np.concatenate
+        return Rows(cat([a.G_rows, b.G_rows]), cat([a.G_cols, b.G_cols]), cat([a.G_vals, b.G_vals]),
+                    cat([a.g_rows, b.g_rows]), cat([a.g_vals, b.g_vals]),
+                    cat([a.W_rows, b.W_rows]), cat([a.W_vals, b.W_vals]), a.phi,
+                    cat([a.gate_rows, b.gate_rows]), cat([a.gate_of, b.gate_of]))
+
+
+@dataclass
+class Pass:
+    """Nodes of a surface S projected on faces of a surface T (global vertex ids), one entry per projected node."""
+    node: np.ndarray            # (p,) global vertex id of the S node
+    area: np.ndarray            # (p,) its tributary area A_k = int_S N^k ds  [m^2]
+    size: np.ndarray            # (p,) local element size on S at the node  [m]
+    target_nodes: np.ndarray    # (p, nv) global vertex ids of the T face it projects on
+    shape: np.ndarray           # (p, nv) N_T(xi) at the projection
+    normal: np.ndarray          # (p, 3) T's outward unit normal at xi
+    delta0: np.ndarray          # (p,) initial gap (x_S - x_closest) . n, >= 0 when apart  [m]
+    target_size: np.ndarray     # (p,) size of that T face  [m]
+
+    def __post_init__(self):
+        self.node = np.asarray(self.node, dtype=_I).reshape(-1)
+        p = len(self.node)
+        self.target_nodes = np.asarray(self.target_nodes, dtype=_I)
+        if self.target_nodes.ndim != 2 or len(self.target_nodes) != p:
+            raise ValueError(f"Pass.target_nodes must have shape ({p}, nv), got {self.target_nodes.shape}")
+        nv = self.target_nodes.shape[1]
+        expect = {"area": (p,), "size": (p,), "shape": (p, nv), "normal": (p, 3),
+                  "delta0": (p,), "target_size": (p,)}
+        for name, shp in expect.items():
+            a = np.asarray(getattr(self, name), dtype=float)
+            if a.shape != shp:
+                raise ValueError(f"Pass.{name} must have shape {shp}, got {a.shape}")
+            setattr(self, name, a)
+
+    @property
+    def target_shape_for_rows(self):
+        """N_a^k(xi_a^l): the weights that spread a master-node row onto the slave face's node rows."""
+        return self.shape
+
+    @staticmethod
+    def from_search(node, area, size, found, face_nodes, face_size):
+        """The Pass of the points that found a face: found is search.closest_faces' dict for points `node`.
+
+        face_nodes (m, nv) global vertex ids and face_size (m,) of the faces given to the search.
+        """
+        f = np.asarray(found["face"])
+        ok = f >= 0
+        fo = f[ok]
+        return Pass(node=np.asarray(node)[ok], area=np.asarray(area)[ok], size=np.asarray(size)[ok],
+                    target_nodes=np.asarray(face_nodes)[fo], shape=found["shape"][ok],
+                    normal=found["normal"][ok], delta0=found["signed_gap"][ok],
+                    target_size=np.asarray(face_size)[fo])
+
+
+def _pass_entries(pss):
+    """Unscaled row of each projected node: columns and values (p, 3 (1 + nv)), g (p,), W (p,)."""
+    p, nv = pss.target_nodes.shape
+    comp = np.arange(3, dtype=_I)
+    nodes = np.concatenate([pss.node[:, None], pss.target_nodes], axis=1)            # (p, 1 + nv)
+    coef = np.concatenate([-np.ones((p, 1)), pss.shape], axis=1)                       # dh/du along -n / +N_j n
+    cols = (3 * nodes[:, :, None] + comp).reshape(p, 3 * (1 + nv))
+    vals = (pss.area[:, None, None] * coef[:, :, None] * pss.normal[:, None, :]).reshape(p, 3 * (1 + nv))
+    return cols, vals, pss.area * pss.delta0, pss.area.copy()
+
+
+def pass_rows(pss, scale):
+    """scale * A_k h_k on row 3 node_k: (G_rows, G_cols, G_vals, g_rows, g_vals, W_rows, W_vals)."""
+    cols, vals, g, W = _pass_entries(pss)
+    scale = np.broadcast_to(np.asarray(scale, dtype=float), (len(pss.node),))
+    row = 3 * pss.node
+    return (np.repeat(row, cols.shape[1]), cols.reshape(-1), (scale[:, None] * vals).reshape(-1),
+            row.copy(), scale * g, row.copy(), scale * W)
+
+
+def _spread_rows(pss, scale):
+    """Row l of the pass, times scale_l N^k(xi^l), added to row 3 k for every node k of its target face."""
+    cols, vals, g, W = _pass_entries(pss)
+    p = len(pss.node)
+    ncol = cols.shape[1]
+    f = np.broadcast_to(np.asarray(scale, dtype=float), (p,))[:, None] * pss.target_shape_for_rows   # (p, nv)
+    keep = f != 0.0            # N^k = 0 (on an edge) or a zero weight adds nothing
+    lk, kk = np.nonzero(keep)
+    fk = f[lk, kk]
+    row = 3 * pss.target_nodes[lk, kk]
+    return (np.repeat(row, ncol), cols[lk].reshape(-1), (fk[:, None] * vals[lk]).reshape(-1),
+            row, fk * g[lk], row.copy(), fk * W[lk])
+
+
+def _rows(parts, phi):
+    G_r, G_c, G_v, g_r, g_v, W_r, W_v = (np.concatenate(x) for x in zip(*parts))
+    return Rows(G_r.astype(_I), G_c.astype(_I), G_v, g_r.astype(_I), g_v, W_r.astype(_I), W_v, float(phi))
+
+
+def master_slave(slave_pass):
+    """One row per slave node k: A_k h_k (phi = 1)."""
+    return _rows([pass_rows(slave_pass, 1.0)], 1.0)
+
+
+def two_pass(slave_pass, master_pass):
+    """One row per slave node (A_k h_k) and one per master node (B_l h_l), phi = 1/2."""
+    return _rows([pass_rows(slave_pass, 1.0), pass_rows(master_pass, 1.0)], 0.5)
+
+
+def weights(rule, slave_size, master_size):
+    """Slave-side weight w_a (w_b = 1 - w_a) of weighted quasi-symmetry, elementwise.
+
+    rule: a float in [0, 1] (constant w_a; 0.5 is the paper, 1 is master/slave)
+    or "finer": w_a = h_b^4 / (h_a^4 + h_b^4), h_a the slave-side and h_b the
+    master-side element size, which weights integration toward the finer side
+    whichever body is called the slave.
+    """
+    h_a = np.asarray(slave_size, dtype=float)
+    h_b = np.asarray(master_size, dtype=float)
+    shape = np.broadcast(h_a, h_b).shape
+    if isinstance(rule, str):
+        if rule != "finer":
+            raise ValueError(f"weight rule must be a number in [0, 1] or 'finer', got {rule!r}")
+        a4, b4 = h_a ** 4, h_b ** 4
+        return np.broadcast_to(b4 / (a4 + b4), shape).copy()
+    w = float(rule)
+    if not 0.0 <= w <= 1.0:
+        raise ValueError(f"weight rule must be a number in [0, 1] or 'finer', got {rule!r}")
+    return np.full(shape, w)
+
+
+def quasi_symmetric(slave_pass, master_pass, weight=0.5):
+    """One row per slave node: C_k = 2 w_a A_k h_k + 2 w_b sum_l N_a^k(xi_a^l) B_l h_l, phi = 1/2 (paper [12]).
+
+    The first term is the slave pass on row 3 k; each master node l's row B_l h_l
+    (measured against slave face f_a^l) is spread on the rows of that face's
+    nodes with weights N_a^k(xi_a^l). With weight "finer" w is evaluated per
+    contribution from the two faces' sizes local to it. A slave node with no
+    projection of its own keeps the second term only. Contributions with a zero
+    weight are left out (so weight = 1 gives exactly the master/slave rows x 2).
+    """
+    w_a = weights(weight, slave_pass.size, slave_pass.target_size)
+    # master pass: the slave side is the target face, the master side the projected node
+    w_b = 1.0 - weights(weight, master_pass.target_size, master_pass.size)
+    first = pass_rows(slave_pass, 2.0 * w_a)
+    keep = first[6] != 0.0
+    if not keep.all():                       # w_a = 0: no first term for that node
+        ncol = len(first[0]) // max(len(keep), 1)
+        kg = np.repeat(keep, ncol)
+        first = (first[0][kg], first[1][kg], first[2][kg], first[3][keep], first[4][keep],
+                 first[5][keep], first[6][keep])
+    return _rows([first, _spread_rows(master_pass, 2.0 * w_b)], 0.5)
+
+
+def _tangent_basis(n):
+    """Two unit tangents t1, t2 with (t1, t2, n) orthonormal, built deterministically from n."""
+    e = np.zeros(3)
+    e[np.argmin(np.abs(n))] = 1.0
+    t1 = np.cross(n, e)
+    t1 /= np.linalg.norm(t1)
+    return t1, np.cross(n, t1)
+
+
+def die_rows(node, area, xyz, point, normal, u_die, sticking=False):
+    """Rows of body nodes against a rigid plane (die) through `point` with unit `normal` pointing toward the body.
+
+    h_k = -(u_k - u_die) . n - delta0_k, delta0_k = (x_k - point) . n (>= 0 apart);
+    row 3 v: A_k h_k, phi = 1. With sticking, rows 3 v + 1 and 3 v + 2 add the
+    tangential equalities A_k (u_k - u_die) . t_i = 0, active iff row 3 v is.
+    """
+    node = np.asarray(node, dtype=_I).reshape(-1)
+    p = len(node)
+    area = np.broadcast_to(np.asarray(area, dtype=float), (p,))
+    xyz = np.asarray(xyz, dtype=float).reshape(p, 3)
+    n = np.asarray(normal, dtype=float).reshape(3)
+    if not abs(np.linalg.norm(n) - 1.0) < 1e-12:
+        raise ValueError(f"die normal must be a unit vector, got {n}")
+    u_die = np.asarray(u_die, dtype=float).reshape(3)
+    delta0 = (xyz - np.asarray(point, dtype=float).reshape(3)) @ n
+    comp = np.arange(3, dtype=_I)
+    row = 3 * node
+
+    def row_block(slot, direction, rhs):
+        r = row + slot
+        return (np.repeat(r, 3), (3 * node[:, None] + comp).reshape(-1),
+                (area[:, None] * direction).reshape(-1), r, area * rhs, r.copy(), area.copy())
+
+    parts = [row_block(0, np.broadcast_to(-n, (p, 3)), delta0 - u_die @ n)]
+    gate_rows, gate_of = _ints(), _ints()
+    if sticking:
+        for slot, t in zip((1, 2), _tangent_basis(n)):
+            parts.append(row_block(slot, np.broadcast_to(t, (p, 3)), np.full(p, u_die @ t)))
+        gate_rows = np.concatenate([row + 1, row + 2])
+        gate_of = np.concatenate([row, row])
+    rows = _rows(parts, 1.0)
+    rows.gate_rows, rows.gate_of = gate_rows, gate_of
+    return rows

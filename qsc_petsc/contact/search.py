@@ -1,0 +1,148 @@
+"""Contact search: which faces lie near a point (bucket grid) and which one it projects on (rank-independent tie rule).
+
+Pure NumPy. The answer for a point depends only on the set of faces given and
+their keys, never on their order, so every MPI partition of a surface picks the
+same face as long as each rank is given (at least) all faces within the search
+radius of the points it owns.
+"""
+
+import numpy as np
+
+from qsc_petsc import fem
+from qsc_petsc.contact.geometry import _dot, project_on_faces
+
+# distances equal within TIE_TOL * (face size) are a tie, decided by the face key
+TIE_TOL = 1e-9
+# a face may cover this many grid cells on average before the cells are made coarser
+_MAX_CELLS_PER_FACE = 27
+
+
+def _empty_pairs():
+    return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+
+
+def candidate_pairs(points, face_min, face_max, radius):
+    """All (point, face) pairs whose face box [face_min - radius, face_max + radius] contains the point.
+
+    Uniform bucket grid, O(p + m + pairs) after sorting: each face is entered in
+    the cells its inflated box covers, each point looked up in its own cell,
+    then the exact box test filters the candidates. Returns (point_idx,
+    face_idx), int64, sorted by point then face.
+    """
+    points = np.asarray(points, dtype=float).reshape(-1, 3)
+    face_min = np.asarray(face_min, dtype=float).reshape(-1, 3)
+    face_max = np.asarray(face_max, dtype=float).reshape(-1, 3)
+    if face_min.shape != face_max.shape:
+        raise ValueError(f"face_min {face_min.shape} and face_max {face_max.shape} must have the same shape")
+    if not radius >= 0:
+        raise ValueError(f"radius must be >= 0, got {radius}")
+    lo = face_min - radius
+    hi = face_max + radius
+    if len(points) == 0 or len(lo) == 0:
+        return _empty_pairs()
+
+    # points outside the faces' overall box meet no face
+    origin = lo.min(axis=0)
+    top = hi.max(axis=0)
+    pidx = np.flatnonzero(((points >= origin) & (points <= top)).all(axis=1))
+    if len(pidx) == 0:
+        return _empty_pairs()
+    pts = points[pidx]
+
+    extent = (hi - lo).max(axis=1)
+    h = float(np.median(extent))
+    span = float((top - origin).max())
+    if not h > 0:
+        h = span if span > 0 else 1.0
+    while True:
+        ncell = np.floor((top - origin) / h).astype(np.int64) + 1
+        c0 = np.floor((lo - origin) / h).astype(np.int64)
+        c1 = np.floor((hi - origin) / h).astype(np.int64)
+        count = (c1 - c0 + 1).prod(axis=1)
+        if count.sum() <= _MAX_CELLS_PER_FACE * len(lo) + 1000 and float(np.prod(ncell.astype(float))) < 2.0 ** 62:
+            break
+        h *= 2.0
+
+    def cell_id(ix, iy, iz):
+        return ix + ncell[0] * (iy + ncell[1] * iz)
+
+    # every (cell, face) entry of the faces' inflated boxes
+    face_of = np.repeat(np.arange(len(lo), dtype=np.int64), count)
+    k = np.arange(count.sum(), dtype=np.int64) - np.repeat(np.cumsum(count) - count, count)
+    nx = (c1[:, 0] - c0[:, 0] + 1)[face_of]
+    ny = (c1[:, 1] - c0[:, 1] + 1)[face_of]
+    entry_cell = cell_id(c0[face_of, 0] + k % nx, c0[face_of, 1] + (k // nx) % ny, c0[face_of, 2] + k // (nx * ny))
+
+    # points sorted by their cell; each entry meets the points of its cell
+    pc = np.floor((pts - origin) / h).astype(np.int64)
+    pc = np.minimum(pc, ncell - 1)
+    point_cell = cell_id(pc[:, 0], pc[:, 1], pc[:, 2])
+    order = np.argsort(point_cell, kind="stable")
+    sorted_cell = point_cell[order]
+    start = np.searchsorted(sorted_cell, entry_cell, side="left")
+    n_in = np.searchsorted(sorted_cell, entry_cell, side="right") - start
+    pair_face = np.repeat(face_of, n_in)
+    offset = np.arange(n_in.sum(), dtype=np.int64) - np.repeat(np.cumsum(n_in) - n_in, n_in)
+    pair_point = order[np.repeat(start, n_in) + offset]
+
+    # a point sits in one cell and a face enters a cell once: no duplicates
+    p = pts[pair_point]
+    hit = ((p >= lo[pair_face]) & (p <= hi[pair_face])).all(axis=1)
+    pair_point, pair_face = pidx[pair_point[hit]], pair_face[hit]
+    srt = np.lexsort((pair_face, pair_point))
+    return pair_point[srt].astype(np.int64), pair_face[srt].astype(np.int64)
+
+
+def closest_faces(points, face_xyz, face_type, face_key, radius):
+    """The face each point projects on: the nearest within radius, ties broken by the smallest face_key row.
+
+    points (p, 3); face_xyz (m, nv, 3); face_key (m, k) int64, e.g. each face's
+    sorted global vertex ids (partition independent). Returns a dict of (p, ...)
+    arrays: face (index into the given faces, -1 if none within radius), xi,
+    shape, closest, normal (the face's outward normal at xi), distance,
+    signed_gap = (point - closest) . normal (>= 0 when apart), inside.
+    """
+    points = np.asarray(points, dtype=float).reshape(-1, 3)
+    face_xyz = np.asarray(face_xyz, dtype=float)
+    nv = fem.FACE_NODES[face_type]
+    if face_xyz.ndim != 3 or face_xyz.shape[1:] != (nv, 3):
+        raise ValueError(f"face_xyz must have shape (m, {nv}, 3) for {face_type} faces, got {face_xyz.shape}")
+    face_key = np.asarray(face_key, dtype=np.int64)
+    if face_key.ndim == 1:
+        face_key = face_key[:, None]
+    if len(face_key) != len(face_xyz):
+        raise ValueError(f"face_key has {len(face_key)} rows for {len(face_xyz)} faces")
+    p = len(points)
+    out = {"face": np.full(p, -1, dtype=np.int64), "xi": np.zeros((p, 2)), "shape": np.zeros((p, nv)),
+           "closest": np.full((p, 3), np.nan), "normal": np.zeros((p, 3)), "distance": np.full(p, np.inf),
+           "signed_gap": np.full(p, np.inf), "inside": np.zeros(p, dtype=bool)}
+    if p == 0 or len(face_xyz) == 0:
+        return out
+
+    pi, fi = candidate_pairs(points, face_xyz.min(axis=1), face_xyz.max(axis=1), radius)
+    proj = project_on_faces(points[pi], face_xyz[fi], face_type)
+    near = proj.distance <= radius
+    pi, fi = pi[near], fi[near]
+    sel = np.flatnonzero(near)
+    d = proj.distance[sel]
+    if len(pi) == 0:
+        return out
+
+    dmin = np.full(p, np.inf)
+    np.minimum.at(dmin, pi, d)
+    tie = d <= dmin[pi] + TIE_TOL * fem.face_size(face_xyz[fi])
+    pi, fi, sel = pi[tie], fi[tie], sel[tie]
+    keys = face_key[fi]
+    order = np.lexsort(tuple(keys[:, j] for j in range(keys.shape[1] - 1, -1, -1)) + (pi,))
+    first = order[np.r_[True, pi[order][1:] != pi[order][:-1]]]
+    who, win, s = pi[first], fi[first], sel[first]
+
+    out["face"][who] = win
+    out["xi"][who] = proj.xi[s]
+    out["shape"][who] = proj.shape[s]
+    out["closest"][who] = proj.closest[s]
+    out["normal"][who] = proj.normal[s]
+    out["distance"][who] = proj.distance[s]
+    out["signed_gap"][who] = _dot(points[who] - proj.closest[s], proj.normal[s])
+    out["inside"][who] = proj.inside[s]
+    return out

@@ -1,0 +1,169 @@
+"""Small-strain isotropic linear elasticity kernels: B matrices, stiffness, energy and stress of hex and tet cells.
+
+Pure NumPy. Dofs within a cell are node-major (node 0 x, y, z, node 1 x, y, z, ...), the
+global interleaved layout. Voigt order is xx, yy, zz, yz, xz, xy with engineering shear
+strains (gamma = 2 eps). Units follow the caller: coordinates in m and moduli in Pa give
+stiffness in N/m, energy in J and stress in Pa.
+"""
+
+import numpy as np
+
+from qsc_petsc import fem
+from qsc_petsc.errors import MeshError
+
+# 2x2x2 Gauss integrates the trilinear hex stiffness fully; one point is exact for linear tets.
+# (fem.gauss_tet(1) is a collapsed rule whose weight is 1/8, not 1/6, so the tet rule is written here.)
+QUADRATURE = {"hex": fem.gauss_hex(2), "tet": (fem.CENTROID["tet"][None, :], np.array([1.0 / 6.0]))}
+
+CHUNK = 2048  # cells per vectorised batch: temporaries stay in cache (~10 MB for hexes)
+
+# _VOIGT[i, j, k] = 1 where strain component i gets d u_j / d x_k
+_VOIGT = np.zeros((6, 3, 3))
+for _i, (_j, _k) in enumerate([(0, 0), (1, 1), (2, 2), (1, 2), (0, 2), (0, 1)]):
+    _VOIGT[_i, _j, _k] = _VOIGT[_i, _k, _j] = 1.0
+
+
+def lame(youngs_modulus, poissons_ratio):
+    """Lame parameters (lmbda, mu) from Young's modulus E (Pa) and Poisson's ratio nu (-)."""
+    E, nu = np.asarray(youngs_modulus, float), np.asarray(poissons_ratio, float)
+    return E * nu / ((1.0 + nu) * (1.0 - 2.0 * nu)), E / (2.0 * (1.0 + nu))
+
+
+def elasticity_matrix(lmbda, mu):
+    """Isotropic elasticity matrix D (..., 6, 6) in Voigt order, for scalar or (m,) Lame parameters."""
+    lmbda, mu = np.asarray(lmbda, float)[..., None, None], np.asarray(mu, float)[..., None, None]
+    one = np.zeros((6, 6))
+    one[:3, :3] = 1.0
+    return lmbda * one + mu * np.diag([2.0, 2.0, 2.0, 1.0, 1.0, 1.0])
+
+
+def _gradients(cell_type, xe, xi, ids=None, weights=None):
+    """Physical shape-function gradients G (m, nq, n, 3) and det J (m, nq) at reference points xi (nq, 3).
+
+    With quadrature weights (nq,), G is scaled by sqrt(w det J) so that sum_q G G^T is the
+    integral int G G^T dV. Raises MeshError if det J <= 0, naming the cell ids[row] (default: row).
+    """
+    _, dN = fem.SHAPE[cell_type](xi)                               # (nq, n, 3) d N_a / d xi_k
+    m, n = xe.shape[:2]
+    nq = len(dN)
+    # One GEMM for all Jacobians, kept as 3x3 components of (m, nq) arrays so that the
+    # cofactors below are plain vector arithmetic: J[i][k] = d x_i / d xi_k.
+    J = xe.transpose(2, 0, 1).reshape(3 * m, n) @ dN.transpose(1, 2, 0).reshape(n, 3 * nq)
+    J = J.reshape(3, m, 3, nq).transpose(0, 2, 1, 3)
+    cof = [[J[(i + 1) % 3, (k + 1) % 3] * J[(i + 2) % 3, (k + 2) % 3]
+            - J[(i + 1) % 3, (k + 2) % 3] * J[(i + 2) % 3, (k + 1) % 3] for k in range(3)] for i in range(3)]
+    detJ = J[0, 0] * cof[0][0] + J[0, 1] * cof[0][1] + J[0, 2] * cof[0][2]
+    bad = np.flatnonzero((detJ <= 0.0).any(axis=1))
+    if len(bad):
+        c = bad[0]
+        raise MeshError(f"{cell_type} cell {c if ids is None else ids[c]} is inverted or degenerate: "
+                        f"det J = {detJ[c].min():.3g} <= 0 at a quadrature point")
+    scale = 1.0 / detJ if weights is None else np.sqrt(weights / detJ)
+    # G_ai = dN_ak (J^-1)_ki with J^-1 = cof^T / det J: one (n, 3) x (3, 3m) GEMM per quadrature point
+    Jinv = (np.array(cof) * scale).transpose(3, 1, 2, 0).reshape(nq, 3, 3 * m)   # [q, k, (m, i)]
+    G = (dN @ Jinv).reshape(nq, n, m, 3).transpose(2, 0, 1, 3)
+    return np.ascontiguousarray(G), detJ
+
+
+def strain_displacement(cell_type, xe, xi):
+    """Strain-displacement matrices B (m, nq, 6, 3n), eps = B u_e, and det J (m, nq) at reference points xi (nq, 3)."""
+    xe = np.asarray(xe, float)
+    G, detJ = _gradients(cell_type, xe, np.atleast_2d(xi))
+    m, nq, n, _ = G.shape
+    B = np.einsum("ijk,mqak->mqiaj", _VOIGT, G, optimize=True)
+    return B.reshape(m, nq, 6, 3 * n), detJ
+
+
+def _stiffness_into(cell_type, xe, lmbda, mu, K, ids):
+    """Write the stiffness of cells xe (c, n, 3) with Lame parameters lmbda, mu (c,) into K (c, 3n, 3n).
+
+    With G_ai = d N_a / d x_i and H_aibj = int G_ai G_bj dV, the isotropic stiffness is
+    K_aibj = lmbda H_aibj + mu (H_ajbi + delta_ij H_akbk): one rank-nq product per cell, a
+    sixth of the work of B^T D B.
+    """
+    xi, w = QUADRATURE[cell_type]
+    Gw, _ = _gradients(cell_type, xe, xi, ids, weights=w)
+    c, nq, n, _ = Gw.shape
+    Gw = Gw.reshape(c, nq, 3 * n)
+    H = np.matmul(Gw.transpose(0, 2, 1), Gw)
+    K_m = np.take(H.reshape(c, -1), _swap_ij(n), axis=1).reshape(H.shape)  # H_ajbi, a gather is the fastest transpose
+    np.multiply(mu[:, None, None], K_m, out=K_m)
+    np.multiply(lmbda[:, None, None], H, out=K)
+    K += K_m
+    trace = mu[:, None, None] * np.einsum("makbk->mab", H.reshape(c, n, 3, n, 3))
+    K5 = K.reshape(c, n, 3, n, 3)
+    for i in range(3):
+        K5[:, :, i, :, i] += trace
+
+
+def _swap_ij(n):
+    """Flat indices taking H_aibj to H_ajbi in a (3n, 3n) matrix."""
+    return np.arange(9 * n * n).reshape(n, 3, n, 3).transpose(0, 3, 2, 1).ravel()
+
+
+def _translate_groups(xe):
+    """Group cells that are exact translates of each other: (index of one cell per shape, shape of each cell)."""
+    rel = xe[:, 1:] - xe[:, :1]
+    scale = np.abs(rel).max()
+    keys = np.rint(rel / (1e-12 * scale if scale > 0 else 1.0)).astype(np.int64).reshape(len(xe), -1)
+    # hash rows to one integer (wrapping multiply-add), then verify: a collision falls back to a row-wise unique
+    mult = np.random.default_rng(12345).integers(1, 2**62, keys.shape[1], dtype=np.int64)
+    _, first, shape = np.unique(keys @ mult, return_index=True, return_inverse=True)
+    if not (keys == keys[first[shape]]).all():
+        _, first, shape = np.unique(keys, axis=0, return_index=True, return_inverse=True)
+    return first, shape.reshape(-1)
+
+
+def stiffness(cell_type, xe, lmbda, mu, share_translates=True):
+    """Element stiffness matrices (m, 3n, 3n) of cells with node coordinates xe (m, n, 3).
+
+    lmbda, mu: Lame parameters (Pa), scalars or (m,). Cells that are exact translates of one
+    another (to 1e-12 of the largest cell extent) with the same lmbda, mu share one computed K
+    unless share_translates is False. Raises MeshError naming the first (local) cell with det J <= 0.
+    """
+    xe = np.asarray(xe, float)
+    m, n = xe.shape[:2]
+    lmbda, mu = (np.broadcast_to(np.asarray(p, float), (m,)) for p in (lmbda, mu))
+    K = np.empty((m, 3 * n, 3 * n))
+    if share_translates and m > 1:
+        first, group = _translate_groups(xe)
+        if len(first) <= m // 2:
+            # refine shape groups by material, so that K is one gather from the distinct matrices
+            _, lid = np.unique(lmbda, return_inverse=True)
+            _, mid = np.unique(mu, return_inverse=True)
+            key = (group * (lid.max() + 1) + lid) * (mid.max() + 1) + mid
+            _, first, group = np.unique(key, return_index=True, return_inverse=True)
+            K_distinct = np.empty((len(first),) + K.shape[1:])
+            for s in range(0, len(first), CHUNK):
+                c = first[s:s + CHUNK]
+                _stiffness_into(cell_type, xe[c], lmbda[c], mu[c], K_distinct[s:s + CHUNK], c)
+            return np.take(K_distinct, group, axis=0, out=K, mode="clip")  # "raise" would buffer out
+    for s in range(0, m, CHUNK):
+        c = np.arange(s, min(s + CHUNK, m))
+        _stiffness_into(cell_type, xe[c], lmbda[c], mu[c], K[s:s + CHUNK], c)
+    return K
+
+
+def strain_energy(cell_type, xe, ue, lmbda, mu):
+    """Strain energy 1/2 int eps : D eps dV (m,) of displacements ue (m, 3n), integrated with the stiffness rule."""
+    xi, w = QUADRATURE[cell_type]
+    B, detJ = strain_displacement(cell_type, xe, xi)
+    eps = B @ np.asarray(ue, float)[:, None, :, None]              # (m, nq, 6, 1)
+    D = elasticity_matrix(lmbda, mu)
+    D = D[:, None] if D.ndim == 3 else D
+    sigma = D @ eps
+    return 0.5 * np.einsum("mqi,mqi,mq,q->m", eps[..., 0], sigma[..., 0], detJ, w)
+
+
+def cell_stress(cell_type, xe, ue, lmbda, mu):
+    """Cauchy stress (m, 6), Voigt order, at each cell's reference centroid."""
+    B, _ = strain_displacement(cell_type, xe, fem.CENTROID[cell_type])
+    eps = B[:, 0] @ np.asarray(ue, float)[..., None]               # (m, 6, 1)
+    return (elasticity_matrix(lmbda, mu) @ eps)[..., 0]
+
+
+def von_mises(stress):
+    """Von Mises equivalent stress (m,) of Voigt stresses (m, 6)."""
+    s = np.asarray(stress, float)
+    xx, yy, zz, yz, xz, xy = s.T
+    return np.sqrt(0.5 * ((xx - yy) ** 2 + (yy - zz) ** 2 + (zz - xx) ** 2) + 3.0 * (yz**2 + xz**2 + xy**2))

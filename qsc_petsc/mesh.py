@@ -1,0 +1,253 @@
+"""All bodies of a scene in one distributed DMPlex, with body and surface labels and rank-independent ids.
+
+The mesh is built on rank 0 (generated boxes or files), handed to DMPlex as one cell list,
+labelled (cell label "body"; one vertex label per surface, named "body.surface") and
+distributed by a PETSc partitioner (options prefix ``qsc_``). Each rank then gets, through
+the migration SF, the original cell connectivity and original vertex ids, so element node
+order and every tie rule stay independent of the number of ranks.
+"""
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from . import fem
+from .errors import MeshError, QscError, SceneError
+from .meshgen import box_mesh, read_mesh_file
+
+MAX_SURFACES = 62          # face membership travels as one int64 bitmask per cell face
+
+
+@dataclass
+class GlobalMesh:
+    """The whole multi-body mesh, on rank 0 only."""
+    points: np.ndarray          # (n, 3)
+    cells: np.ndarray           # (m, k) VTK order
+    cell_type: str
+    cell_body: np.ndarray       # (m,) body index
+    face_mask: np.ndarray       # (m, faces per cell) int64 bitmask over surface indices
+    surface_names: list         # "body.surface", index = bit
+
+
+@dataclass
+class LocalMesh:
+    """One rank's part of the distributed mesh (no overlap: every cell lives on exactly one rank)."""
+    comm: object
+    dm: PETSc.DMPlex
+    cell_type: str
+    body_names: list
+    surface_names: list
+    coords: np.ndarray          # (nv, 3) local vertex coordinates [m]
+    cells: np.ndarray           # (nc, k) local vertex indices, VTK order
+    cell_body: np.ndarray       # (nc,)
+    cell_orig: np.ndarray       # (nc,) original cell id (rank-independent)
+    face_mask: np.ndarray       # (nc, faces per cell)
+    vert_orig: np.ndarray       # (nv,) original vertex id (rank-independent)
+    gvert: np.ndarray           # (nv,) global vertex number in PETSc's distributed numbering
+    owned: np.ndarray           # (nv,) bool: this rank owns the vertex (and its dofs)
+    owner: np.ndarray           # (nv,) rank owning each local vertex
+    n_vertices: int             # global
+    n_cells: int                # global
+    vertex_range: tuple         # owned global vertex numbers [start, end)
+    _surface_vertices: dict = field(default_factory=dict)
+
+    @property
+    def face_type(self):
+        return fem.FACE_TYPE[self.cell_type]
+
+    def surface_index(self, name):
+        try:
+            return self.surface_names.index(name)
+        except ValueError:
+            raise MeshError(f"unknown surface {name!r}") from None
+
+    def surface_faces(self, name):
+        """Local boundary faces of a surface: (cell index (k,), local face index (k,))."""
+        bit = np.int64(1) << np.int64(self.surface_index(name))
+        c, f = np.nonzero(self.face_mask & bit)
+        return c, f
+
+    def face_nodes(self, cells, local_faces):
+        """Local vertex indices (k, nv) of the given cell faces, ordered counter-clockwise from outside."""
+        return fem.cell_faces(self.cell_type, self.cells[cells], local_faces)
+
+    def surface_vertices(self, name):
+        """Local vertex indices of every local copy of a vertex on a surface (from the DMPlex label)."""
+        if name not in self._surface_vertices:
+            self.surface_index(name)
+            label = self.dm.getLabel(name)
+            v0, v1 = self.dm.getDepthStratum(0)
+            pts = label.getStratumIS(1).getIndices() if label.getStratumSize(1) else np.zeros(0, int)
+            self._surface_vertices[name] = np.sort(np.asarray(pts, dtype=np.int64) - v0)
+        return self._surface_vertices[name]
+
+    def body_vertices(self, body):
+        """Local vertex indices of a body."""
+        return np.unique(self.cells[self.cell_body == body])
+
+
+def on_root(comm, fn):
+    """Run fn on rank 0 and re-raise its QscError on every rank, so all ranks fail together."""
+    result, error = None, None
+    if comm.rank == 0:
+        try:
+            result = fn()
+        except QscError as exc:
+            error = exc
+    error = comm.bcast(error, root=0)
+    if error is not None:
+        raise error
+    return result
+
+
+def build_global_mesh(scene):
+    """Generate or read every body and merge them into one vertex/cell numbering (rank 0)."""
+    points, cells, bodies, masks, names = [], [], [], [], []
+    offset, cell_types = 0, set()
+    for b, body in enumerate(scene.bodies):
+        spec = body.mesh
+        if spec.type == "box":
+            bm = box_mesh(spec.origin, spec.size, spec.cells, spec.element)
+        else:
+            bm = read_mesh_file(spec.path, spec.scale)
+        cell_types.add(bm.cell_type)
+        if len(cell_types) > 1:
+            raise SceneError(f"bodies[{b}].mesh: all bodies must use one element type "
+                             f"(found {sorted(cell_types)}); mixed hex/tet meshes are not supported")
+        mask = np.zeros((len(bm.cells), len(fem.CELL_FACES[bm.cell_type])), dtype=np.int64)
+        for sname, cf in sorted(bm.surfaces.items()):
+            bit = len(names)
+            if bit >= MAX_SURFACES:
+                raise MeshError(f"bodies[{b}].mesh: more than {MAX_SURFACES} named surfaces in the scene")
+            names.append(f"{body.name}.{sname}")
+            mask[cf[:, 0], cf[:, 1]] |= np.int64(1) << np.int64(bit)
+        points.append(bm.points)
+        cells.append(bm.cells + offset)
+        bodies.append(np.full(len(bm.cells), b))
+        masks.append(mask)
+        offset += len(bm.points)
+    return GlobalMesh(np.concatenate(points), np.concatenate(cells), cell_types.pop(),
+                      np.concatenate(bodies), np.concatenate(masks), names)
+
+
+def check_surface_references(scene, surface_names):
+    """Every surface named by a boundary condition, contact pair or die must exist in the mesh."""
+    def check(key, ref):
+        if ref not in surface_names:
+            body = ref.split(".")[0]
+            known = sorted(s.split(".", 1)[1] for s in surface_names if s.split(".")[0] == body)
+            raise SceneError(f"{key}: unknown surface {ref!r} (body {body!r} has: {', '.join(known)})")
+    for i, bc in enumerate(scene.boundary):
+        check(f"boundary[{i}].surface", bc.surface)
+    for i, pair in enumerate(scene.contact):
+        check(f"contact[{i}].slave", pair.slave)
+        check(f"contact[{i}].master", pair.master)
+    for i, die in enumerate(scene.die):
+        for j, s in enumerate(die.surfaces):
+            check(f"die[{i}].surfaces[{j}]", s)
+
+
+def _bcast_points(sf, root_data, n_leaf):
+    """Broadcast per-point int64 rows (width w) from the original to the distributed chart."""
+    width = root_data.shape[1]
+    leaf = np.full((n_leaf, width), -1, dtype=np.int64)
+    unit = MPI.INT64_T.Create_contiguous(width).Commit()
+    try:
+        sf.bcastBegin(unit, np.ascontiguousarray(root_data), leaf, MPI.REPLACE)
+        sf.bcastEnd(unit, np.ascontiguousarray(root_data), leaf, MPI.REPLACE)
+    finally:
+        unit.Free()
+    return leaf
+
+
+def distribute_mesh(scene, comm):
+    """Build, label and distribute the scene's mesh; return this rank's LocalMesh."""
+    gm = on_root(comm, lambda: build_global_mesh(scene))
+    header = comm.bcast((gm.cell_type, gm.surface_names, len(gm.points), len(gm.cells))
+                        if comm.rank == 0 else None, root=0)
+    cell_type, surface_names, n_vertices, n_cells = header
+    check_surface_references(scene, surface_names)
+    nn = fem.CELL_NODES[cell_type]
+    nf = len(fem.CELL_FACES[cell_type])
+
+    if comm.rank == 0:
+        cells = gm.cells.astype(PETSc.IntType)
+        coords = gm.points
+    else:
+        cells = np.zeros((0, nn), dtype=PETSc.IntType)
+        coords = np.zeros((0, 3))
+    dm = PETSc.DMPlex().createFromCellList(3, cells, coords, interpolate=False, comm=comm)
+    dm.setName("qsc_mesh")
+    dm.setOptionsPrefix("qsc_")
+    c0, c1 = dm.getHeightStratum(0)
+    v0, v1 = dm.getDepthStratum(0)
+
+    dm.createLabel("body")
+    for name in surface_names:
+        dm.createLabel(name)
+    if comm.rank == 0:
+        body_label = dm.getLabel("body")
+        for b in range(len(scene.bodies)):
+            ids = np.flatnonzero(gm.cell_body == b).astype(PETSc.IntType) + c0
+            body_label.setStratumIS(b, PETSc.IS().createGeneral(ids, comm=PETSc.COMM_SELF))
+        for bit, name in enumerate(surface_names):
+            c, f = np.nonzero(gm.face_mask & (np.int64(1) << np.int64(bit)))
+            verts = np.unique(fem.cell_faces(cell_type, gm.cells[c], f)).astype(PETSc.IntType) + v0
+            dm.getLabel(name).setStratumIS(1, PETSc.IS().createGeneral(verts, comm=PETSc.COMM_SELF))
+
+    pstart, pend = dm.getChart()
+    root = np.full((pend - pstart, nn + nf + 2), -1, dtype=np.int64)
+    if comm.rank == 0:
+        root[c0:c1, :nn] = gm.cells
+        root[c0:c1, nn:nn + nf] = gm.face_mask
+        root[c0:c1, nn + nf] = gm.cell_body
+        root[c0:c1, nn + nf + 1] = np.arange(n_cells)
+        root[v0:v1, 0] = np.arange(n_vertices)
+
+    partitioner = dm.getPartitioner()
+    partitioner.setFromOptions()
+    sf = dm.distribute() if comm.size > 1 else None
+    if sf is not None:
+        q0, q1 = dm.getChart()
+        leaf = _bcast_points(sf, root, q1 - q0)
+    else:
+        leaf = root
+    c0, c1 = dm.getHeightStratum(0)
+    v0, v1 = dm.getDepthStratum(0)
+    vert_orig = leaf[v0:v1, 0].copy()
+    conn_orig = leaf[c0:c1, :nn]
+    order = np.argsort(vert_orig)
+    local_cells = order[np.searchsorted(vert_orig, conn_orig, sorter=order)]
+
+    section = PETSc.Section().create(comm=comm)
+    section.setNumFields(1)
+    section.setFieldComponents(0, 3)
+    section.setChart(*dm.getChart())
+    for p in range(v0, v1):
+        section.setDof(p, 3)
+        section.setFieldDof(p, 0, 3)
+    section.setUp()
+    dm.setSection(section)
+    dofs = dm.getLGMap().getIndices()
+    gvert = np.asarray(dofs[0::3], dtype=np.int64) // 3
+
+    owner = np.full(v1 - v0, comm.rank, dtype=np.int64)
+    if comm.size > 1:                       # serially the point SF has no graph
+        _, leaves, remote = dm.getPointSF().getGraph()
+        ghost_v = np.asarray(leaves, dtype=np.int64) - v0
+        is_vertex = (ghost_v >= 0) & (ghost_v < v1 - v0)
+        owner[ghost_v[is_vertex]] = np.asarray(remote)[is_vertex, 0]
+    owned = owner == comm.rank
+    n_owned = int(owned.sum())
+    vstart = comm.exscan(n_owned) or 0
+
+    return LocalMesh(
+        comm=comm, dm=dm, cell_type=cell_type,
+        body_names=[b.name for b in scene.bodies], surface_names=surface_names,
+        coords=dm.getCoordinatesLocal().getArray().reshape(-1, 3).copy(),
+        cells=np.ascontiguousarray(local_cells), cell_body=leaf[c0:c1, nn + nf].copy(),
+        cell_orig=leaf[c0:c1, nn + nf + 1].copy(), face_mask=leaf[c0:c1, nn:nn + nf].copy(),
+        vert_orig=vert_orig, gvert=gvert, owned=owned, owner=owner,
+        n_vertices=n_vertices, n_cells=n_cells, vertex_range=(vstart, vstart + n_owned))

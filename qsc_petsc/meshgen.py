@@ -1,0 +1,225 @@
+"""Body meshes as plain arrays on one rank: structured boxes, meshio files, and their named boundary surfaces."""
+
+import io
+import sys
+from contextlib import redirect_stderr, redirect_stdout
+from dataclasses import dataclass, field
+from itertools import permutations
+
+import numpy as np
+
+from qsc_petsc import fem
+from qsc_petsc.errors import MeshError
+
+BOX_SURFACES = ("xmin", "xmax", "ymin", "ymax", "zmin", "zmax")  # the order of fem.HEX_FACES
+MESHIO_TYPES = {"tetra": "tet", "hexahedron": "hex"}
+FACET_TYPES = {"tet": "triangle", "hex": "quad"}
+
+# corners of the unit cube in VTK hex order
+_CUBE = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]])
+
+
+def _kuhn_tets():
+    """The 6 Kuhn tets of the unit cube as hex-local node lists (6, 4), all positively oriented.
+
+    Each tet walks from corner 0 to corner 6 along the edges e_a, e_b, e_c of one axis
+    permutation; every hex face is then cut along its diagonal through the face's lowest
+    corner, the same in neighbouring hexes, so the split is conforming.
+    """
+    corner = {tuple(c): i for i, c in enumerate(_CUBE)}
+    tets = []
+    for a, b, _ in permutations(range(3)):
+        v1 = np.eye(3, dtype=int)[a]
+        v2 = v1 + np.eye(3, dtype=int)[b]
+        tet = [0, corner[tuple(v1)], corner[tuple(v2)], 6]
+        if np.linalg.det(np.array([v1, v2, [1, 1, 1]])) < 0:
+            tet[1], tet[2] = tet[2], tet[1]
+        tets.append(tet)
+    return np.array(tets)
+
+
+KUHN_TETS = _kuhn_tets()
+
+
+def _kuhn_faces_on(side):
+    """(tet in hex, local tet face) pairs (2, 2) that lie on box side 0..5 (xmin, xmax, ...)."""
+    axis, value = divmod(side, 2)
+    return np.array([(t, f) for t in range(6) for f in range(4)
+                     if (_CUBE[KUHN_TETS[t][fem.TET_FACES[f]], axis] == value).all()])
+
+
+@dataclass
+class BodyMesh:
+    """One body's mesh: VTK-ordered cells with positive volume and named boundary surfaces."""
+    points: np.ndarray                 # (n, 3) float64
+    cells: np.ndarray                  # (m, 8) hex or (m, 4) tet, int64
+    cell_type: str                     # "hex" | "tet"
+    surfaces: dict[str, np.ndarray] = field(default_factory=dict)  # name -> (k, 2) int64 (cell, local face)
+
+
+def box_mesh(origin, size, cells, element="hex"):
+    """Structured mesh of the box [origin, origin + size] with cells = (nx, ny, nz) hexes, or 6 tets per hex."""
+    n = np.asarray(cells)
+    if n.shape != (3,) or not np.issubdtype(n.dtype, np.integer) or (n < 1).any():
+        raise MeshError(f"box cells must be three positive integers, got {cells!r}")
+    if np.shape(size) != (3,) or (np.asarray(size, float) <= 0).any():
+        raise MeshError(f"box size must be three positive lengths, got {size!r}")
+    if np.shape(origin) != (3,):
+        raise MeshError(f"box origin must be a point (x, y, z), got {origin!r}")
+    if element not in ("hex", "tet"):
+        raise MeshError(f"box element must be 'hex' or 'tet', got {element!r}")
+    nx, ny, nz = (int(v) for v in n)
+    axes = [o + s * np.arange(k + 1) / k for o, s, k in zip(np.asarray(origin, float), np.asarray(size, float), n)]
+    Z, Y, X = np.meshgrid(axes[2], axes[1], axes[0], indexing="ij")      # point id i + (nx+1) (j + (ny+1) k)
+    points = np.column_stack([X.ravel(), Y.ravel(), Z.ravel()])
+    stride = np.array([1, nx + 1, (nx + 1) * (ny + 1)])
+    base = (np.arange(nx) + stride[1] * np.arange(ny)[:, None] + stride[2] * np.arange(nz)[:, None, None]).ravel()
+    hexes = base[:, None] + _CUBE @ stride                               # cell id i + nx (j + ny k)
+    ids = np.arange(nx * ny * nz).reshape(nz, ny, nx)
+    on_side = [ids[:, :, 0], ids[:, :, -1], ids[:, 0, :], ids[:, -1, :], ids[0], ids[-1]]
+    if element == "hex":
+        surfaces = {name: np.column_stack([c.ravel(), np.full(c.size, side)])
+                    for side, (name, c) in enumerate(zip(BOX_SURFACES, on_side))}
+        return BodyMesh(points, hexes.astype(np.int64), "hex", surfaces)
+    surfaces = {}
+    for side, (name, c) in enumerate(zip(BOX_SURFACES, on_side)):
+        tf = _kuhn_faces_on(side)
+        surfaces[name] = np.column_stack([(6 * c.ravel()[:, None] + tf[:, 0]).ravel(),
+                                          np.tile(tf[:, 1], c.size)])
+    return BodyMesh(points, hexes[:, KUHN_TETS].reshape(-1, 4).astype(np.int64), "tet", surfaces)
+
+
+def _row_ids(rows, n):
+    """Id (k,) of each row of integers in [0, n), equal rows sharing one id."""
+    bits = max(int(n - 1).bit_length(), 1)
+    per = max(63 // bits, 1)                   # columns packed into each int64 sort key
+    keys = []
+    for s in range(0, rows.shape[1], per):
+        k = np.zeros(len(rows), np.int64)
+        for col in rows[:, s:s + per].T:
+            k = (k << bits) | col
+        keys.append(k)
+    order = np.argsort(keys[0]) if len(keys) == 1 else np.lexsort(keys[::-1])
+    sk = np.stack(keys)[:, order]
+    new = np.r_[True, (sk[:, 1:] != sk[:, :-1]).any(axis=0)]
+    ids = np.empty(len(rows), np.int64)
+    ids[order] = np.cumsum(new) - 1
+    return ids
+
+
+def boundary_faces(cell_type, cells):
+    """(cell, local face) rows (k, 2) of every face that belongs to one cell only."""
+    cells = np.asarray(cells, np.int64)
+    table = fem.CELL_FACES[cell_type]
+    faces = np.sort(cells[:, table].reshape(-1, table.shape[1]), axis=1)
+    if len(faces) == 0:
+        return np.empty((0, 2), np.int64)
+    ids = _row_ids(faces, cells.max() + 1)
+    once = np.flatnonzero(np.bincount(ids)[ids] == 1)
+    return np.column_stack([once // len(table), once % len(table)])
+
+
+def _orient(cell_type, points, cells):
+    """Cells reordered so that each has positive volume (tets by a node swap, mirrored hexes top for bottom)."""
+    if cell_type == "tet":
+        x = points[cells]
+        vol = np.einsum("mi,mi->m", x[:, 1] - x[:, 0], np.cross(x[:, 2] - x[:, 0], x[:, 3] - x[:, 0]))
+        flip = [0, 2, 1, 3]
+    else:
+        _, dN = fem.shape_hex(np.zeros(3))
+        vol = np.linalg.det(np.einsum("mai,ak->mik", points[cells], dN[0]))
+        flip = [4, 5, 6, 7, 0, 1, 2, 3]
+    cells = cells.copy()
+    cells[vol < 0] = cells[vol < 0][:, flip]
+    return cells
+
+
+def _named_facets(mesh):
+    """Surface groups of a meshio mesh: {name: [(meshio cell type, facet node array), ...]}."""
+    groups = {}
+    tags = mesh.cell_data.get("gmsh:physical")
+    if tags is not None:
+        names = {int(v[0]): k for k, v in mesh.field_data.items() if len(v) > 1 and int(v[1]) == 2}
+        for block, t in zip(mesh.cells, tags):
+            if block.dim == 2:
+                for tag in np.unique(t):
+                    name = names.get(int(tag), f"surface{tag}")
+                    groups.setdefault(name, []).append((block.type, block.data[t == tag]))
+    for name, per_block in mesh.cell_sets.items():
+        if name.startswith("gmsh:"):
+            continue
+        for block, idx in zip(mesh.cells, per_block):
+            if idx is not None and len(idx) and block.dim == 2:
+                groups.setdefault(name, []).append((block.type, block.data[np.asarray(idx)]))
+    return groups
+
+
+def read_mesh_file(path, scale=1.0):
+    """Read a first-order all-tet or all-hex mesh with meshio; 2D physical groups become named surfaces.
+
+    Coordinates are multiplied by scale. Adds the surface "boundary" (all boundary faces),
+    drops points no volume cell uses, and reorders inverted cells. Raises MeshError.
+    """
+    import meshio  # only needed here
+
+    # meshio prints a failed reader's reason and then calls sys.exit: capture both
+    printed = io.StringIO()
+    try:
+        with redirect_stdout(printed), redirect_stderr(printed):
+            mesh = meshio.read(path)
+    except (Exception, SystemExit) as e:  # ReadError, OSError, ValueError, KeyError, ...
+        if isinstance(e, SystemExit):  # its reason was printed, wrapped to the terminal width
+            reason = " ".join(s.strip() for s in printed.getvalue().splitlines() if s.strip())
+        else:
+            reason = " ".join(f"{type(e).__name__}: {e}".split())
+        raise MeshError(f"cannot read mesh file {path}: {reason}") from None
+    if printed.getvalue().strip():
+        sys.stdout.write(printed.getvalue())  # meshio's warnings on a successful read
+    found = {}
+    for block in mesh.cells:
+        if block.dim == 3:
+            found[block.type] = found.get(block.type, 0) + len(block.data)
+    if len(found) != 1 or next(iter(found)) not in MESHIO_TYPES:
+        what = ", ".join(f"{n} {t}" for t, n in found.items()) or "no volume cells"
+        raise MeshError(f"mesh file {path}: volume cells must be all tetra or all hexahedron (first order), "
+                        f"found {what}")
+    (mtype,) = found
+    cell_type = MESHIO_TYPES[mtype]
+    points = np.asarray(mesh.points, float)
+    if points.ndim != 2 or points.shape[1] != 3:
+        raise MeshError(f"mesh file {path}: points must be 3D, got shape {points.shape}")
+    cells = np.concatenate([b.data for b in mesh.cells if b.type == mtype]).astype(np.int64)
+    cells = _orient(cell_type, points, cells)
+
+    boundary = boundary_faces(cell_type, cells)
+    groups = _named_facets(mesh)
+    if "boundary" in groups:
+        raise MeshError(f"mesh file {path}: surface name 'boundary' is reserved for all boundary faces")
+    names, facets = list(groups), []
+    for name in names:
+        for ftype, data in groups[name]:
+            if ftype != FACET_TYPES[cell_type]:
+                raise MeshError(f"mesh file {path}: surface {name!r} has {ftype} facets, "
+                                f"but {mtype} cells have {FACET_TYPES[cell_type]} faces")
+        facets.append(np.concatenate([d for _, d in groups[name]]).astype(np.int64))
+    # join facets to boundary faces by their sorted node tuples
+    bnodes = fem.cell_faces(cell_type, cells[boundary[:, 0]], boundary[:, 1])
+    rows = np.sort(np.concatenate([bnodes] + facets), axis=1)
+    ids = _row_ids(rows, len(points))
+    face_of = np.full(ids.max() + 1 if len(ids) else 0, -1)
+    face_of[ids[:len(boundary)]] = np.arange(len(boundary))
+    hit = face_of[ids[len(boundary):]]
+    surfaces, start = {}, 0
+    for name, f in zip(names, facets):
+        h = hit[start:start + len(f)]
+        start += len(f)
+        if (h < 0).any():
+            raise MeshError(f"mesh file {path}: surface {name!r}: {(h < 0).sum()} of {len(h)} facets "
+                            f"are not boundary faces of the {mtype} cells")
+        surfaces[name] = boundary[np.unique(h)]
+    surfaces["boundary"] = boundary
+
+    used = np.unique(cells)
+    renumber = np.full(len(points), -1, np.int64)
+    renumber[used] = np.arange(len(used))
+    return BodyMesh(points[used] * scale, renumber[cells], cell_type, surfaces)

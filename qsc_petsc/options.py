@@ -1,0 +1,68 @@
+"""PETSc start-up and the options database: scene [petsc] tables under the qsc_ prefix, command line first."""
+
+import sys
+
+PREFIX = "qsc_"
+
+
+def split_petsc_args(argv):
+    """Separate PETSc options (single dash, e.g. -qsc_pc_type lu) from the CLI's own arguments.
+
+    A token after a PETSc option is its value unless it is itself an option or a scene file."""
+    own, petsc = [], []
+    i = 0
+    while i < len(argv):
+        tok = argv[i]
+        if tok.startswith("-") and not tok.startswith("--") and not _is_number(tok) and len(tok) > 1:
+            petsc.append(tok)
+            nxt = argv[i + 1] if i + 1 < len(argv) else None
+            if nxt is not None and (not nxt.startswith("-") or _is_number(nxt)) and not nxt.endswith(".toml"):
+                petsc.append(nxt)
+                i += 1
+        else:
+            own.append(tok)
+        i += 1
+    return own, petsc
+
+
+def _is_number(tok):
+    try:
+        float(tok)
+        return True
+    except ValueError:
+        return False
+
+
+def init_petsc(petsc_args):
+    """Initialise petsc4py with the given options (before any module imports PETSc)."""
+    import petsc4py
+    petsc4py.init([sys.argv[0]] + list(petsc_args))
+    from petsc4py import PETSc
+    return PETSc
+
+
+def insert_scene_options(scene_options):
+    """Put the scene's [petsc] options under the qsc_ prefix, unless the command line set them."""
+    from petsc4py import PETSc
+    opts = PETSc.Options()
+    inserted = {}
+    for key, value in scene_options.items():
+        name = PREFIX + key
+        if not opts.hasName(name):
+            opts.setValue(name, value)
+            inserted[name] = value
+    return inserted
+
+
+def options_in_effect():
+    """Every option in the database, as {name: value}."""
+    from petsc4py import PETSc
+    return dict(sorted(PETSc.Options().getAll().items()))
+
+
+def options_text(options, from_scene):
+    lines = ["# PETSc options in effect (source: scene [petsc] table or command line)"]
+    for name, value in options.items():
+        source = "scene" if name in from_scene else "command line"
+        lines.append(f"-{name} {value}".rstrip() + f"    # {source}")
+    return "\n".join(lines) + "\n"

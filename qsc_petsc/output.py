@@ -1,0 +1,126 @@
+"""Results on disk: XDMF/HDF5 fields per load step (rank 0 writes gathered data) and summary.json.
+
+Fields are gathered to rank 0 in the original (rank-independent) vertex and cell numbering,
+so files from runs on different numbers of ranks compare entry by entry. solution.xdmf is a
+temporal collection for ParaView and meshio.xdmf.TimeSeriesReader; steps/step_NNNN.xdmf hold
+one load step each, for meshio.read. Both are rewritten after every step: a run that stops
+later keeps what it had written.
+"""
+
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+
+TOPOLOGY = {"hex": "Hexahedron", "tet": "Tetrahedron"}
+ATTRIBUTE_TYPE = {1: "Scalar", 3: "Vector", 6: "Tensor6"}
+
+
+def gather_rows(comm, ids, values, n_total):
+    """Rows of `values` keyed by global ids, gathered into one (n_total, ...) array on rank 0."""
+    parts = comm.gather((np.asarray(ids), np.asarray(values)), root=0)
+    if comm.rank != 0:
+        return None
+    shape = parts[0][1].shape[1:]
+    dtype = np.result_type(*[p[1].dtype for p in parts])
+    out = np.zeros((n_total,) + shape, dtype=dtype)
+    for i, v in parts:
+        out[i] = v
+    return out
+
+
+class ResultWriter:
+    """Writes the mesh once and one group of fields per load step."""
+
+    def __init__(self, mesh, directory, write_xdmf=True):
+        self.mesh, self.comm = mesh, mesh.comm
+        self.directory = Path(directory)
+        self.enabled = write_xdmf
+        self.steps = []
+        self.own_v = np.flatnonzero(mesh.owned)
+        if not self.enabled:
+            return
+        points = gather_rows(self.comm, mesh.vert_orig[self.own_v], mesh.coords[self.own_v], mesh.n_vertices)
+        cells = gather_rows(self.comm, mesh.cell_orig, mesh.vert_orig[mesh.cells], mesh.n_cells)
+        if self.comm.rank == 0:
+            import h5py
+            (self.directory / "steps").mkdir(parents=True, exist_ok=True)
+            with h5py.File(self.directory / "solution.h5", "w") as h5:
+                h5["mesh/geometry"] = points
+                h5["mesh/topology"] = cells
+            self.shape = (len(points), cells.shape)
+
+    def write_step(self, step, time, point_data, cell_data):
+        """point_data: name -> (local vertices, k) arrays; cell_data: name -> (local cells, k) arrays."""
+        if not self.enabled:
+            return
+        mesh = self.mesh
+        gathered = {}
+        for name, arr in point_data.items():
+            gathered[("Node", name)] = gather_rows(self.comm, mesh.vert_orig[self.own_v],
+                                                   np.asarray(arr)[self.own_v], mesh.n_vertices)
+        for name, arr in cell_data.items():
+            gathered[("Cell", name)] = gather_rows(self.comm, mesh.cell_orig, np.asarray(arr), mesh.n_cells)
+        if self.comm.rank != 0:
+            return
+        import h5py
+        with h5py.File(self.directory / "solution.h5", "a") as h5:
+            for (_, name), data in gathered.items():
+                key = f"step_{step:04d}/{name}"
+                if key in h5:
+                    del h5[key]
+                h5[key] = data
+        fields = [(center, name, data.shape) for (center, name), data in gathered.items()]
+        self.steps = [s for s in self.steps if s[0] != step] + [(step, time, fields)]
+        self._write_xml()
+
+    def _grid(self, step, time, fields, h5path, with_time=True):
+        n_points, (n_cells, k) = self.shape
+        kind = TOPOLOGY[self.mesh.cell_type]
+        lines = [f'<Grid Name="step_{step:04d}" GridType="Uniform">'] + ([f'<Time Value="{time!r}"/>'] if with_time else [])
+        lines += [
+                 f'<Topology TopologyType="{kind}" NumberOfElements="{n_cells}">',
+                 f'<DataItem Dimensions="{n_cells} {k}" NumberType="Int" Precision="8" Format="HDF">'
+                 f'{h5path}:/mesh/topology</DataItem></Topology>',
+                 '<Geometry GeometryType="XYZ">',
+                 f'<DataItem Dimensions="{n_points} 3" NumberType="Float" Precision="8" Format="HDF">'
+                 f'{h5path}:/mesh/geometry</DataItem></Geometry>']
+        for center, name, shape in fields:
+            width = shape[1] if len(shape) > 1 else 1
+            dims = " ".join(str(s) for s in shape)
+            lines.append(f'<Attribute Name="{name}" AttributeType="{ATTRIBUTE_TYPE.get(width, "Matrix")}" '
+                         f'Center="{center}"><DataItem Dimensions="{dims}" NumberType="Float" Precision="8" '
+                         f'Format="HDF">{h5path}:/step_{step:04d}/{name}</DataItem></Attribute>')
+        lines.append("</Grid>")
+        return "\n".join(lines)
+
+    def _write_xml(self):
+        head = '<?xml version="1.0"?>\n<Xdmf Version="3.0">\n<Domain>\n'
+        tail = "\n</Domain>\n</Xdmf>\n"
+        grids = [self._grid(s, t, f, "solution.h5") for s, t, f in self.steps]
+        _atomic_write(self.directory / "solution.xdmf",
+                      head + '<Grid Name="load_steps" GridType="Collection" CollectionType="Temporal">\n'
+                      + "\n".join(grids) + "\n</Grid>" + tail)
+        for s, t, f in self.steps:
+            _atomic_write(self.directory / "steps" / f"step_{s:04d}.xdmf",
+                          head + self._grid(s, t, f, "../solution.h5", with_time=False) + tail)
+
+
+def _atomic_write(path, text):
+    tmp = Path(f"{path}.tmp")
+    tmp.write_text(text)
+    os.replace(tmp, path)
+
+
+def write_json(path, data):
+    """Write JSON atomically (rank 0 only is the caller's business)."""
+    _atomic_write(Path(path), json.dumps(data, indent=2, default=_jsonable) + "\n")
+
+
+def _jsonable(x):
+    if isinstance(x, np.generic):
+        return x.item()
+    if isinstance(x, np.ndarray):
+        return x.tolist()
+    raise TypeError(f"not JSON serialisable: {type(x)}")

@@ -1,0 +1,218 @@
+"""The run: validated scene -> distributed mesh -> operators -> load steps -> output folder."""
+
+import resource
+import time
+from contextlib import contextmanager
+from pathlib import Path
+
+import numpy as np
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from . import __version__, assembly, elasticity, options
+from .errors import QscError, SceneError
+from .mesh import distribute_mesh, on_root
+from .output import ResultWriter, write_json
+from .solver import System, solve_load_step
+
+
+class Phases:
+    """Wall time per phase (max over ranks) and a PETSc log event per phase, for -log_view."""
+
+    def __init__(self, comm):
+        self.comm, self.seconds, self.events = comm, {}, {}
+
+    @contextmanager
+    def __call__(self, name):
+        event = self.events.setdefault(name, PETSc.Log.Event(f"qsc:{name}"))
+        event.begin()
+        t0 = time.perf_counter()
+        try:
+            yield
+        finally:
+            event.end()
+            self.seconds[name] = self.seconds.get(name, 0.0) + time.perf_counter() - t0
+
+    def summary(self):
+        names = sorted(set().union(*self.comm.allgather(set(self.seconds))))
+        local = np.array([self.seconds.get(n, 0.0) for n in names])
+        worst = np.zeros_like(local)
+        self.comm.Allreduce(local, worst, op=MPI.MAX)
+        return dict(zip(names, worst.tolist()))
+
+
+def peak_memory_mib(comm):
+    rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0     # KiB on Linux
+    per_rank = comm.allgather(rss)
+    return {"max_rank": max(per_rank), "total": sum(per_rank), "per_rank": per_rank}
+
+
+def prepare_output(scene, out_dir, comm):
+    directory = Path(out_dir if out_dir else scene.output.directory.replace("{name}", scene.name))
+
+    def make():
+        try:
+            directory.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise SceneError(f"output.directory: cannot create {str(directory)!r}: {exc.strerror}") from None
+    on_root(comm, make)
+    return directory
+
+
+class Run:
+    """Everything one solve needs, built in order; `execute` runs the load steps."""
+
+    def __init__(self, scene, comm, out_dir=None, log=print):
+        self.scene, self.comm = scene, comm
+        self.log = log if comm.rank == 0 else (lambda *a, **k: None)
+        self.phases = Phases(comm)
+        self.out = prepare_output(scene, out_dir, comm)
+        self.from_scene = options.insert_scene_options(scene.petsc)
+        with self.phases("mesh"):
+            self.mesh = distribute_mesh(scene, comm)
+        mesh = self.mesh
+        with self.phases("assembly"):
+            self.lmbda, self.mu = assembly.cell_materials(mesh, scene)
+            d, o = assembly.vertex_graph_counts(mesh)
+            K = assembly.create_dof_matrix(mesh, d, o)
+            assembly.assemble_stiffness(mesh, K, self.lmbda, self.mu)
+            u = K.createVecRight()
+            self.f_ext = assembly.surface_load(mesh, scene, u)
+            self.bc_dofs, bc_values, self.bc_per_boundary = assembly.dirichlet_dofs(mesh, scene)
+            nullspace = assembly.rigid_body_modes(mesh, u)
+            self.system = System(K, self.f_ext, self.bc_dofs, bc_values, nullspace, comm,
+                                 scene.solver.max_active_set_iterations)
+            self.n_constrained = comm.allreduce(len(self.bc_dofs), op=MPI.SUM)
+        self.contact = None
+        if scene.contact or scene.die:
+            from .contact.model import ContactModel
+            self.contact = ContactModel(mesh, scene, u, self.phases)
+        self.writer = ResultWriter(mesh, self.out, scene.output.xdmf)
+        if comm.rank == 0:
+            (self.out / "scene.resolved.toml").write_text(scene.to_toml())
+        self.summary = self._summary_header()
+
+    def _summary_header(self):
+        mesh = self.mesh
+        return {
+            "scene": self.scene.name, "status": "running", "qsc_petsc": __version__,
+            "petsc": "%d.%d.%d" % PETSc.Sys.getVersion(), "ranks": self.comm.size,
+            "mesh": {"cell_type": mesh.cell_type, "cells": mesh.n_cells, "vertices": mesh.n_vertices,
+                     "dofs": 3 * mesh.n_vertices, "constrained_dofs": self.n_constrained,
+                     "bodies": mesh.body_names,
+                     "cells_per_rank": self.comm.allgather(len(mesh.cells)),
+                     "dofs_per_rank": self.comm.allgather(3 * int(mesh.owned.sum()))},
+            "steps": [],
+        }
+
+    def local_displacement(self, u):
+        """Ghosted local displacement array (nv, 3) from the global Vec."""
+        dm = self.mesh.dm
+        ul = dm.createLocalVec()
+        dm.globalToLocal(u, ul)
+        arr = ul.getArray().reshape(-1, 3).copy()
+        ul.destroy()
+        return arr
+
+    def reactions(self, u, t):
+        """Net force [N] that each displacement/symmetry boundary exerts on the body."""
+        mesh = self.mesh
+        dm = mesh.dm
+        ul = self.local_displacement(u).ravel()
+        fl = dm.createLocalVec()
+        fl.getArray()[:] = assembly.internal_force(mesh, ul, self.lmbda, self.mu)
+        r = u.duplicate()
+        r.set(0.0)
+        dm.localToGlobal(fl, r, addv=PETSc.InsertMode.ADD_VALUES)
+        r.axpy(-t, self.f_ext)
+        if self.contact is not None:
+            self.contact.add_forces(u, r)
+        rarr = r.getArray().reshape(-1, 3)
+        r0 = u.getOwnershipRange()[0] // 3
+        out = {}
+        for i, bc in enumerate(self.scene.boundary):
+            if bc.type == "pressure":
+                continue
+            v = mesh.surface_vertices(bc.surface)
+            v = v[mesh.owned[v]]
+            total = self.comm.allreduce(rarr[mesh.gvert[v] - r0].sum(axis=0), op=MPI.SUM)
+            out[f"boundary[{i}] {bc.surface}"] = total.tolist()     # K u - f: the force it applies to the body
+        r.destroy()
+        fl.destroy()
+        return out
+
+    def fields(self, u):
+        mesh = self.mesh
+        ul = self.local_displacement(u)
+        k = mesh.cells.shape[1]
+        ue = ul[mesh.cells].reshape(len(mesh.cells), 3 * k)
+        stress = elasticity.cell_stress(mesh.cell_type, mesh.coords[mesh.cells], ue, self.lmbda, self.mu)
+        point = {"displacement": ul}
+        cell = {"stress": stress, "von_mises": elasticity.von_mises(stress)[:, None],
+                "body": mesh.cell_body[:, None].astype(float),
+                "rank": np.full((len(mesh.cells), 1), float(self.comm.rank))}
+        return point, cell, ul
+
+    def write_summary(self):
+        self.summary["time"] = self.phases.summary()
+        self.summary["peak_memory_mib"] = peak_memory_mib(self.comm)
+        if self.comm.rank == 0:
+            write_json(self.out / "summary.json", self.summary)
+
+    def execute(self):
+        scene, system, comm = self.scene, self.system, self.comm
+        n_steps = scene.load.steps
+        u = system.u.copy()
+        update = (lambda u, t: self.contact.terms(u, t)) if self.contact else (lambda u, t: [])
+        try:
+            for step in range(1, n_steps + 1):
+                t_prev, t = (step - 1) / n_steps, step / n_steps
+                with self.phases("solve"):
+                    aug = scene.contact[0] if scene.contact else None
+                    u, stats = solve_load_step(
+                        system, step, t_prev, t, u, update, scene.solver.max_cutbacks,
+                        augmented_tol=aug.augmented_tolerance if aug else 1e-6,
+                        augmented_max=aug.augmented_max_iterations if aug else 25, log=self.log)
+                with self.phases("output"):
+                    point, cell, ul = self.fields(u)
+                    record = self._step_record(step, t, stats, u, ul)
+                    if self.contact is not None:
+                        cpoint, record["contact"] = self.contact.report(u, ul)
+                        point.update(cpoint)
+                    self.writer.write_step(step, t, point, cell)
+                    self.summary["steps"].append(record)
+                    self.write_summary()
+                last = stats["solves"][-1]
+                self.log(f"step {step}/{n_steps}: load factor {t:.4g}, {last['snes_iterations']} Newton / "
+                         f"{sum(s['ksp_iterations'] for s in stats['solves'])} Krylov iterations, "
+                         f"{last['snes_reason']}")
+        except QscError as exc:
+            self.summary["status"] = "failed"
+            self.summary["error"] = str(exc)
+            self.write_summary()
+            raise
+        self.summary["status"] = "ok"
+        self.summary["petsc_options"] = options.options_in_effect()
+        self.write_summary()
+        if comm.rank == 0:
+            (self.out / "petsc_options.txt").write_text(
+                options.options_text(options.options_in_effect(), self.from_scene))
+        self.u = u
+        return self.summary
+
+    def _step_record(self, step, t, stats, u, ul):
+        last = stats["solves"][-1]
+        umax = self.comm.allreduce(float(np.abs(ul[self.mesh.owned]).max(initial=0.0)), op=MPI.MAX)
+        return {
+            "step": step, "load_factor": t, "cutbacks": stats["cutbacks"],
+            "snes_iterations": sum(s["snes_iterations"] for s in stats["solves"]),
+            "ksp_iterations": sum(s["ksp_iterations"] for s in stats["solves"]),
+            "snes_reason": last["snes_reason"], "ksp_reason": last["ksp_reason"],
+            "solves": stats["solves"], "max_abs_displacement": umax,
+            "reactions": self.reactions(u, t),
+        }
+
+    def destroy(self):
+        self.system.destroy()
+        if self.contact is not None:
+            self.contact.destroy()

@@ -1,0 +1,249 @@
+"""Load-stepped SNES solve of K u + F_c(u) = f: semi-smooth Newton on the penalised contact rows.
+
+The elastic part is linear and assembled once (Dirichlet rows and columns eliminated with a
+lifting vector); every contact term contributes G^T m to the residual and G^T D G to the
+Jacobian (formulation.md section 4). Between two contact searches G is frozen, so a step
+converges when the active set stops changing and the residual (or the step) is small.
+"""
+
+import numpy as np
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from .contact.penalty import multipliers_update, row_response
+from .errors import ConvergenceError
+
+SNES_REASONS = {v: k for k, v in vars(PETSc.SNES.ConvergedReason).items() if not k.startswith("_")}
+KSP_REASONS = {v: k for k, v in vars(PETSc.KSP.ConvergedReason).items() if not k.startswith("_")}
+SUBSET = PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN
+
+
+class ConstraintTerm:
+    """One set of penalised constraint rows C = G u - g with weights W (a contact pair or a die)."""
+
+    def __init__(self, name, G, g, W, phi, eps_n, closed_tol, gate_of=None, augmented=False):
+        self.name, self.G, self.g, self.W, self.phi, self.eps_n = name, G, g, W, phi, eps_n
+        w = W.getArray()
+        self.rows = np.flatnonzero(w > 0)                 # local indices of rows that exist
+        self.closed_tol = closed_tol
+        self.gate_of = gate_of                            # local row -> local gate row, or -1
+        self.augmented = augmented
+        self.lmbda = np.zeros(len(self.rows)) if augmented else None
+        self.c = G.createVecLeft()
+        self.m = G.createVecLeft()
+        self.active = np.zeros(len(self.rows), dtype=bool)
+        self.d = np.zeros(len(self.rows))
+        self.energy = 0.0
+
+    def evaluate(self, u):
+        """Row values, multipliers and active set at u (collective)."""
+        self.G.mult(u, self.c)
+        self.c.axpy(-1.0, self.g)
+        c = self.c.getArray()[self.rows]
+        gate = None if self.gate_of is None else self.gate_of[self.rows]
+        self.energy, m, self.d, self.active = row_response(
+            c, self.W.getArray()[self.rows], self.eps_n, self.phi, self.closed_tol,
+            self.lmbda, gate)
+        marr = self.m.getArray()
+        marr[:] = 0.0
+        marr[self.rows] = m
+
+    def add_force(self, f):
+        """f += G^T m: the scatter of G^T is where slave multipliers cross ranks."""
+        self.G.multTransposeAdd(self.m, f, f)
+
+    def jacobian(self):
+        """G^T diag(d) G as a new matrix."""
+        dvec = self.G.createVecLeft()
+        dvec.set(0.0)
+        dvec.getArray()[self.rows] = self.d
+        DG = self.G.copy()
+        DG.diagonalScale(L=dvec)
+        return self.G.transposeMatMult(DG)
+
+    def update_multipliers(self):
+        """Uzawa step of the augmented Lagrangian; returns the relative change of the multipliers."""
+        c = self.c.getArray()[self.rows]
+        new = multipliers_update(self.lmbda, c, self.W.getArray()[self.rows], self.eps_n)
+        comm = self.G.getComm().tompi4py()
+        change = comm.allreduce(float(np.sum((new - self.lmbda) ** 2)), op=MPI.SUM)
+        size = comm.allreduce(float(np.sum(new ** 2)), op=MPI.SUM)
+        self.lmbda = new
+        return np.sqrt(change / size) if size > 0 else 0.0
+
+
+class System:
+    """K0 u - t b + sum_terms G^T m with Dirichlet rows u_i - t ubar_i, solved by SNES."""
+
+    def __init__(self, K, f_ext, bc_dofs, bc_values, nullspace, comm, max_it=50):
+        self.comm = comm
+        self.u = K.createVecRight()
+        self.u.set(0.0)
+        ubar = self.u.duplicate()
+        ubar.set(0.0)
+        ubar.setValues(bc_dofs.astype(PETSc.IntType), bc_values)
+        ubar.assemble()
+        self.ubar = ubar
+        self.b = f_ext.copy()
+        K.zeroRowsColumns(bc_dofs.astype(PETSc.IntType), 1.0, ubar, self.b)   # K0 and its lifting
+        K.setNearNullSpace(nullspace)
+        self.K = K
+        self.bc_local = (bc_dofs - self.u.getOwnershipRange()[0]).astype(np.int64)
+        self.bc_dofs = bc_dofs.astype(PETSc.IntType)
+        self.terms = []
+        self.J = K
+        self.t = 0.0
+        self.prev_active = None
+
+        self.snes = PETSc.SNES().create(comm=comm)
+        self.snes.setOptionsPrefix("qsc_")
+        self.snes.setType("newtonls")
+        opts = PETSc.Options()
+        if not opts.hasName("qsc_snes_linesearch_type"):     # full semi-smooth Newton steps by default
+            opts.setValue("qsc_snes_linesearch_type", "basic")
+        self.snes.setTolerances(rtol=1e-10, atol=1e-50, stol=1e-10, max_it=max_it)
+        ksp = self.snes.getKSP()
+        ksp.setType("cg")
+        ksp.getPC().setType("gamg")
+        ksp.setTolerances(rtol=1e-10)
+        self.r = self.u.duplicate()
+        self.snes.setFunction(self._residual, self.r)
+        self.snes.setJacobian(self._jacobian, self.J, self.J)
+        self.snes.setConvergenceTest(self._converged)
+        self.snes.setFromOptions()
+
+    def set_terms(self, terms):
+        """Install the constraint terms of a new search; rebuild the Jacobian's sparsity once."""
+        self.terms = terms
+        if not terms:
+            self.J = self.K
+        else:
+            J = self.K.copy()
+            for term in terms:
+                GtG = term.G.transposeMatMult(term.G)
+                J.axpy(1.0, GtG, PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
+                GtG.destroy()
+            J.setNearNullSpace(self.K.getNearNullSpace())
+            self.J = J
+        self.snes.setJacobian(self._jacobian, self.J, self.J)
+        self.prev_active = None
+
+    def _residual(self, snes, u, f):
+        self.K.mult(u, f)
+        f.axpy(-self.t, self.b)
+        for term in self.terms:
+            term.evaluate(u)
+        if self.terms:
+            fc = f.duplicate()
+            fc.set(0.0)
+            for term in self.terms:
+                term.add_force(fc)
+            fc.getArray()[self.bc_local] = 0.0
+            f.axpy(1.0, fc)
+            fc.destroy()
+
+    def _jacobian(self, snes, u, J, P):
+        if not self.terms:
+            return
+        J.zeroEntries()
+        J.axpy(1.0, self.K, SUBSET)
+        for term in self.terms:
+            Jc = term.jacobian()
+            J.axpy(1.0, Jc, SUBSET)
+            Jc.destroy()
+        J.zeroRowsColumns(self.bc_dofs, 1.0)
+
+    def active_count(self):
+        return self.comm.allreduce(int(sum(t.active.sum() for t in self.terms)), op=MPI.SUM)
+
+    def _converged(self, snes, it, norms):
+        xnorm, ynorm, fnorm = norms
+        active = np.concatenate([t.active for t in self.terms]) if self.terms else np.zeros(0, bool)
+        changed = 0 if self.prev_active is None else int(np.sum(active != self.prev_active))
+        changed = self.comm.allreduce(changed, op=MPI.SUM)
+        first = self.prev_active is None
+        self.prev_active = active.copy()
+        rtol, atol, stol, max_it = snes.getTolerances()
+        if it == 0:
+            self.fnorm0 = fnorm
+            return PETSc.SNES.ConvergedReason.CONVERGED_FNORM_ABS if fnorm <= atol else 0
+        if not np.isfinite(fnorm):
+            return PETSc.SNES.ConvergedReason.DIVERGED_FNORM_NAN
+        if changed == 0 and not first:
+            if fnorm <= atol:
+                return PETSc.SNES.ConvergedReason.CONVERGED_FNORM_ABS
+            if fnorm <= rtol * self.fnorm0:
+                return PETSc.SNES.ConvergedReason.CONVERGED_FNORM_RELATIVE
+            if ynorm <= stol * xnorm:
+                return PETSc.SNES.ConvergedReason.CONVERGED_SNORM_RELATIVE
+        if it >= max_it:
+            return PETSc.SNES.ConvergedReason.DIVERGED_MAX_IT
+        return 0
+
+    def solve_at(self, t, u0):
+        """One SNES solve at load factor t from initial guess u0; returns (ok, stats)."""
+        self.t = t
+        self.prev_active = None
+        u = u0.copy()
+        u.getArray()[self.bc_local] = t * self.ubar.getArray()[self.bc_local]
+        self.snes.solve(None, u)
+        reason = self.snes.getConvergedReason()
+        ksp_reason = self.snes.getKSP().getConvergedReason()
+        stats = {
+            "snes_iterations": self.snes.getIterationNumber(),
+            "ksp_iterations": self.snes.getLinearSolveIterations(),
+            "snes_reason": SNES_REASONS.get(reason, str(reason)),
+            "ksp_reason": KSP_REASONS.get(ksp_reason, str(ksp_reason)),
+            "active_rows": self.active_count(),
+        }
+        return reason > 0, u, stats
+
+    def destroy(self):
+        self.snes.destroy()
+        if self.J is not self.K:
+            self.J.destroy()
+
+
+def solve_load_step(system, step, t_prev, t_target, u, update_terms, max_cutbacks,
+                    augmented_tol=1e-6, augmented_max=25, log=None):
+    """Advance from t_prev to t_target, halving the increment on failure; returns (u, stats)."""
+    dt = t_target - t_prev
+    t = t_prev
+    cutbacks, records = 0, []
+    while t < t_target - 1e-14:
+        t_try = min(t + dt, t_target)
+        system.set_terms(update_terms(u, t_try))
+        ok, u_new, stats = system.solve_at(t_try, u)
+        augmented = [term for term in system.terms if term.augmented]
+        outer = 0
+        while ok and augmented:
+            change = max(term.update_multipliers() for term in augmented)
+            outer += 1
+            if change <= augmented_tol:
+                break
+            if outer >= augmented_max:
+                ok = False
+                stats["snes_reason"] = "AUGMENTED_LAGRANGIAN_MAX_IT"
+                break
+            ok, u_new, more = system.solve_at(t_try, u_new)
+            stats["snes_iterations"] += more["snes_iterations"]
+            stats["ksp_iterations"] += more["ksp_iterations"]
+            stats.update({k: more[k] for k in ("snes_reason", "ksp_reason", "active_rows")})
+        stats.update(load_factor=t_try, augmented_iterations=outer)
+        records.append(stats)
+        if ok:
+            u.destroy()
+            u, t = u_new, t_try
+            continue
+        u_new.destroy()
+        cutbacks += 1
+        if log:
+            log(f"step {step}: solve at load factor {t_try:.6g} failed "
+                f"({stats['snes_reason']}, KSP {stats['ksp_reason']}); cutting the increment in half")
+        if cutbacks > max_cutbacks:
+            raise ConvergenceError(
+                f"load step {step} (load factor {t_try:.6g}) did not converge after {max_cutbacks} "
+                f"cutbacks: SNES {stats['snes_reason']} after {stats['snes_iterations']} iterations, "
+                f"KSP {stats['ksp_reason']}")
+        dt *= 0.5
+    return u, {"cutbacks": cutbacks, "solves": records}

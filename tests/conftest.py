@@ -1,0 +1,44 @@
+"""Shared fixtures: MPI-safe temporary folders and a one-call scene runner (collective under mpirun)."""
+
+import gc
+import shutil
+import tempfile
+from pathlib import Path
+
+import pytest
+from mpi4py import MPI
+
+ROOT = Path(__file__).resolve().parents[1]
+CONFIGS = ROOT / "configs"
+
+
+@pytest.fixture
+def comm():
+    return MPI.COMM_WORLD
+
+
+@pytest.fixture
+def mpi_tmp(comm):
+    """A temporary folder shared by all ranks (made by rank 0), removed after the test."""
+    path = tempfile.mkdtemp(prefix="qsc_test_") if comm.rank == 0 else None
+    path = Path(comm.bcast(path, root=0))
+    yield path
+    gc.collect()
+    comm.Barrier()
+    if comm.rank == 0:
+        shutil.rmtree(path, ignore_errors=True)
+
+
+def run_scene(scene_path, out, overrides=(), comm=MPI.COMM_WORLD):
+    """Load, run and return (run, summary); every rank calls it."""
+    from qsc_petsc.run import Run
+    from qsc_petsc.scene import load_scene
+    scene = load_scene(scene_path, overrides)
+    run = Run(scene, comm, out, log=lambda *a, **k: None)
+    summary = run.execute()
+    return run, summary
+
+
+def all_close(comm, ok):
+    """True on every rank iff ok on every rank (assert only on such values under MPI)."""
+    return comm.allreduce(bool(ok), op=MPI.LAND)

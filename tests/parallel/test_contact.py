@@ -1,0 +1,110 @@
+"""Contact in parallel: patch tests, role swap, rigid dies, rank invariance, bad input.
+
+Runs serially in the suite and under mpirun -n 2 and -n 3 (the interface is then split across
+ranks, and on 3 ranks some rank owns no contact surface); assertions use all-reduced values."""
+
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+from conftest import CONFIGS, all_close, run_scene
+from qsc_petsc.errors import SceneError
+
+FORMULATIONS = ["master_slave", "two_pass", "quasi_symmetric"]
+
+
+def stress_zz_error(run, p=1.0):
+    """max over cells of |sigma_zz + p| / p, all ranks."""
+    point, cell, _ = run.fields(run.u)
+    err = np.abs(cell["stress"][:, 2] + p).max(initial=0.0) / p
+    return run.comm.allreduce(err, op=MPI.MAX)
+
+
+@pytest.mark.parametrize("formulation", FORMULATIONS)
+def test_matching_patch_test_is_exact(comm, mpi_tmp, formulation):
+    """With matching 4x4 meshes every formulation gives sigma_zz = -p to 1e-8 and penetration p / eps_n."""
+    run, summary = run_scene(CONFIGS / "patch_test.toml", mpi_tmp,
+                             [f"contact.0.formulation={formulation}", "bodies.1.mesh.cells=[4,4,2]"], comm)
+    assert summary["status"] == "ok"
+    assert stress_zz_error(run) <= 1e-8
+    pair = next(iter(summary["steps"][-1]["contact"].values()))
+    assert pair["mean_penetration_slave"] == pytest.approx(1.0 / pair["eps_n"], rel=1e-6)
+    assert pair["contact_area"] == pytest.approx(1.0, rel=1e-12)
+    assert pair["total_normal_force"] == pytest.approx(1.0, rel=1e-8)
+    run.destroy()
+
+
+def test_two_pass_is_symmetric_in_the_roles(comm, mpi_tmp):
+    """two_pass gives the same displacements when slave and master swap (non-matching meshes)."""
+    sums = []
+    for k, (slave, master) in enumerate((("upper.zmin", "lower.zmax"), ("lower.zmax", "upper.zmin"))):
+        run, summary = run_scene(CONFIGS / "patch_test.toml", mpi_tmp / str(k),
+                                 ["contact.0.formulation=two_pass", f"contact.0.slave={slave}",
+                                  f"contact.0.master={master}"], comm)
+        ul = run.local_displacement(run.u)[run.mesh.owned]
+        sums.append(comm.allreduce(float(np.sum(ul ** 2)), op=MPI.SUM))
+        sums.append(summary["steps"][-1]["max_abs_displacement"])
+        run.destroy()
+    assert sums[0] == pytest.approx(sums[2], rel=1e-8)
+    assert sums[1] == pytest.approx(sums[3], rel=1e-8)
+
+
+def test_block_between_rigid_dies_is_uniaxial(comm, mpi_tmp):
+    """One block squeezed by two frictionless rigid dies reproduces uniaxial compression exactly."""
+    from qsc_petsc.run import Run
+    from qsc_petsc.scene import load_scene, parse_scene
+    data = load_scene(CONFIGS / "block_compression.toml", ["bodies.0.mesh.cells=[3,3,4]"]).to_dict()
+    data["boundary"] = [b for b in data["boundary"] if b["surface"] in ("block.xmin", "block.ymin")]
+    data["die"] = [{"name": "bottom", "point": [0, 0, 0], "normal": [0, 0, 1], "surfaces": ["block.zmin"]},
+                   {"name": "top", "point": [0, 0, 1], "normal": [0, 0, -1], "motion": [0, 0, -0.01],
+                    "surfaces": ["block.zmax"], "penalty": 1e8}]
+    data["die"][0]["penalty"] = 1e8
+    run = Run(parse_scene(data, CONFIGS, "dies"), comm, mpi_tmp, log=lambda *a: None)
+    summary = run.execute()
+    assert summary["status"] == "ok"
+    # the two dies' penalty compliance shortens the effective stroke: compare with the measured strain
+    point, cell, ul = run.fields(run.u)
+    s = cell["stress"]
+    szz = comm.allreduce(float(s[:, 2].mean()) if len(s) else 0.0, op=MPI.SUM) / comm.size
+    dev = comm.allreduce(float(np.abs(s[:, [0, 1, 3, 4, 5]]).max(initial=0.0)), op=MPI.MAX)
+    spread = comm.allreduce(float(np.abs(s[:, 2] - s[:, 2].mean()).max(initial=0.0)) if len(s) else 0.0,
+                            op=MPI.MAX)
+    assert szz == pytest.approx(-10.0, rel=1e-6)
+    assert dev <= 1e-8 * 10.0 and spread <= 1e-8 * 10.0
+    run.destroy()
+
+
+@pytest.mark.parametrize("formulation", FORMULATIONS)
+def test_rank_invariance_non_matching(comm, mpi_tmp, formulation):
+    """Non-matching patch test: the summary on N ranks equals the serial one to 1e-8 relative."""
+    from qsc_petsc.run import Run
+    from qsc_petsc.scene import load_scene
+    scene = load_scene(CONFIGS / "patch_test.toml", [f"contact.0.formulation={formulation}"])
+    out = []
+    for c in (comm, MPI.COMM_SELF):
+        run = Run(scene, c, mpi_tmp / ("w" if c is comm else f"s{comm.rank}"), log=lambda *a: None)
+        s = run.execute()
+        pair = next(iter(s["steps"][-1]["contact"].values()))
+        out.append([s["steps"][-1]["max_abs_displacement"], pair["total_normal_force"],
+                    pair["max_penetration_slave"], pair["max_penetration_master"], pair["contact_area"],
+                    float(pair["active_rows"]), float(pair["rows"])])
+        run.destroy()
+    assert all_close(comm, np.allclose(out[0], out[1], rtol=1e-8, atol=1e-14))
+
+
+@pytest.mark.parametrize("change, message", [
+    ("contact.0.master=lower.top", 'contact[0].master: box body "lower" has no surface "top"'),
+    ("contact.0.slave=lower.zmax", "contact[0]"),
+])
+def test_bad_contact_input(comm, mpi_tmp, change, message):
+    """Bad contact input stops with a SceneError naming the key, on every rank."""
+    from qsc_petsc.run import Run
+    from qsc_petsc.scene import load_scene
+    with pytest.raises(SceneError, match=message.replace("[", r"\[").replace("]", r"\]")):
+        Run(load_scene(CONFIGS / "patch_test.toml", [change]), comm, mpi_tmp, log=lambda *a: None)
+
+
+def test_surfaces_beyond_search_distance(comm, mpi_tmp):
+    """Surfaces farther apart than the search distance are an error naming the pair."""
+    with pytest.raises(SceneError, match=r"contact\[0\]: no node"):
+        run_scene(CONFIGS / "patch_test.toml", mpi_tmp, ["bodies.1.mesh.origin=[0,0,0.9]"], comm)

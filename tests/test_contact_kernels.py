@@ -1,0 +1,567 @@
+"""Unit tests of the pure-NumPy contact kernels: projection, search, rows of each formulation, penalty response."""
+
+import numpy as np
+import pytest
+
+from qsc_petsc import fem
+from qsc_petsc.contact.geometry import project_on_faces
+from qsc_petsc.contact.penalty import gate_positions, multipliers_update, row_response
+from qsc_petsc.contact.rows import Pass, Rows, die_rows, master_slave, quasi_symmetric, two_pass, weights
+from qsc_petsc.contact.search import candidate_pairs, closest_faces
+
+EPS_N = 1.0e3
+
+
+# ---------------------------------------------------------------- fixtures: surfaces, passes, dense G
+
+def warp(x, y):
+    return 0.05 * np.sin(np.pi * x) * np.sin(np.pi * y) + 0.02 * np.sin(2.3 * x + 0.4) * np.sin(1.9 * y + 0.1)
+
+
+def flat(x, y):
+    return np.zeros_like(x)
+
+
+class Surface:
+    """A structured n x n patch of [0, 1]^2 lifted to z = zfun(x, y) + offset, outward normal +z (or -z if down)."""
+
+    def __init__(self, n, face_type, zfun, first_id, down=False, offset=0.0, tilt=None):
+        t = np.linspace(0.0, 1.0, n + 1)
+        X, Y = np.meshgrid(t, t, indexing="ij")
+        x, y = X.ravel(), Y.ravel()
+        self.xyz = np.column_stack([x, y, zfun(x, y) + offset])
+        if tilt is not None:                     # a rigid rotation of the whole patch
+            self.xyz = self.xyz @ tilt.T
+        v = np.arange((n + 1) ** 2).reshape(n + 1, n + 1)          # v[i, j]: node at (x_i, y_j)
+        quads = np.column_stack([v[:-1, :-1].ravel(), v[1:, :-1].ravel(), v[1:, 1:].ravel(), v[:-1, 1:].ravel()])
+        if face_type == "quad":
+            faces = quads
+        else:
+            faces = np.concatenate([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]])
+        if down:
+            faces = faces[:, ::-1]
+        self.type = face_type
+        self.faces = faces
+        self.ids = first_id + np.arange(len(x), dtype=np.int64)
+        self.gfaces = self.ids[faces]
+        xf = self.xyz[faces]
+        self.face_size = fem.face_size(xf)
+        self.area = np.zeros(len(x))
+        np.add.at(self.area, faces, fem.face_nodal_areas(face_type, xf))
+        cnt = np.zeros(len(x))
+        np.add.at(cnt, faces, 1.0)
+        self.size = np.zeros(len(x))
+        np.add.at(self.size, faces, np.repeat(self.face_size[:, None], faces.shape[1], axis=1))
+        self.size /= cnt
+
+
+def make_pass(S, T, radius=0.2):
+    found = closest_faces(S.xyz, T.xyz[T.faces], T.type, np.sort(T.gfaces, axis=1), radius)
+    return Pass.from_search(S.ids, S.area, S.size, found, T.gfaces, T.face_size)
+
+
+def pair(nA, tA, nB, tB, zfun=warp, gap=0.0, tilt=None):
+    A = Surface(nA, tA, zfun, 0, down=False, tilt=tilt)
+    B = Surface(nB, tB, zfun, len(A.ids), down=True, offset=gap, tilt=tilt)
+    return A, B, 3 * (len(A.ids) + len(B.ids))
+
+
+def dense(rows, ndof):
+    G = np.zeros((ndof, ndof))
+    np.add.at(G, (rows.G_rows, rows.G_cols), rows.G_vals)
+    g = np.zeros(ndof)
+    np.add.at(g, rows.g_rows, rows.g_vals)
+    W = np.zeros(ndof)
+    np.add.at(W, rows.W_rows, rows.W_vals)
+    r = np.flatnonzero(W > 0)
+    gate = gate_positions(r, rows.gate_rows, rows.gate_of) if len(rows.gate_rows) else None
+    return G[r], g[r], W[r], r, gate
+
+
+def response(rows, ndof, u, **kw):
+    G, g, W, _, gate = dense(rows, ndof)
+    e, m, d, act = row_response(G @ u - g, W, EPS_N, rows.phi, gate_of=gate, **kw)
+    return e, G.T @ m, G.T @ (d[:, None] * G), act
+
+
+def away_from_kinks(rows, ndof, scale, seed, lmbda=None, margin=2e-4):
+    """A random u (ndof,) with every row multiplier at least margin away from its kink, some rows open and some closed."""
+    G, g, W, _, _ = dense(rows, ndof)
+    for s in range(seed, seed + 500):
+        u = scale * np.random.default_rng(s).standard_normal(ndof)
+        a = (G @ u - g) / W + (0.0 if lmbda is None else lmbda / EPS_N)
+        if np.abs(a).min() > margin and (a > 0).any() and (a < 0).any():
+            return u
+    raise AssertionError("no u away from the kinks")
+
+
+def check_derivatives(rows, ndof, u, **kw):
+    _, F, J, _ = response(rows, ndof, u, **kw)
+    h = 1e-6
+    Ffd = np.empty(ndof)
+    Jfd = np.empty((ndof, ndof))
+    for i in range(ndof):
+        up, um = u.copy(), u.copy()
+        up[i] += h
+        um[i] -= h
+        ep, Fp, _, _ = response(rows, ndof, up, **kw)
+        em, Fm, _, _ = response(rows, ndof, um, **kw)
+        Ffd[i] = (ep - em) / (2 * h)
+        Jfd[:, i] = (Fp - Fm) / (2 * h)
+    assert np.abs(F).max() > 0 and np.abs(J).max() > 0
+    np.testing.assert_allclose(Ffd, F, rtol=0, atol=1e-7 * np.abs(F).max())
+    np.testing.assert_allclose(Jfd, J, rtol=0, atol=1e-7 * np.abs(J).max())
+    np.testing.assert_allclose(J, J.T, atol=1e-12 * np.abs(J).max())
+
+
+FORMULATIONS = {
+    "master_slave": lambda sp, mp: master_slave(sp),
+    "two_pass": two_pass,
+    "quasi_symmetric_0.5": lambda sp, mp: quasi_symmetric(sp, mp, 0.5),
+    "quasi_symmetric_finer": lambda sp, mp: quasi_symmetric(sp, mp, "finer"),
+    "quasi_symmetric_0.2": lambda sp, mp: quasi_symmetric(sp, mp, 0.2),
+}
+MESH_PAIRS = [(3, "quad", 4, "quad"), (4, "quad", 3, "tri"), (3, "tri", 4, "tri")]
+
+
+# ---------------------------------------------------------------- geometry
+
+def random_warped_quad(rng):
+    x = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], dtype=float)
+    x[:, :2] += 0.15 * rng.uniform(-1, 1, (4, 2))
+    x[:, 2] += 0.25 * rng.uniform(-1, 1, 4)
+    return x
+
+
+def test_projection_recovers_xi_on_warped_quads():
+    """Points off a warped quad along its normal at xi shall project back to xi, at distance |t|, inside."""
+    rng = np.random.default_rng(1)
+    faces = np.array([random_warped_quad(rng) for _ in range(200)])
+    xi = rng.uniform(-0.95, 0.95, (200, 2))
+    N, _ = fem.shape_quad(xi)
+    on = np.einsum("pv,pvi->pi", N, faces)
+    n = np.array([fem.face_normals("quad", f[None], x[None])[0][0, 0] for f, x in zip(faces, xi)])
+    t = rng.uniform(-0.05, 0.05, 200)
+    pr = project_on_faces(on + t[:, None] * n, faces, "quad")
+    np.testing.assert_allclose(pr.xi, xi, atol=1e-11)
+    np.testing.assert_allclose(pr.distance, np.abs(t), atol=1e-13)
+    np.testing.assert_allclose(pr.normal, n, atol=1e-12)
+    np.testing.assert_allclose(pr.closest, on, atol=1e-13)
+    np.testing.assert_allclose(pr.shape, N, atol=1e-11)
+    assert pr.inside.all()
+
+
+def brute_force_distance(point, face, face_type, k=601):
+    s = np.linspace(-1, 1, k) if face_type == "quad" else np.linspace(0, 1, k)
+    X, Y = np.meshgrid(s, s, indexing="ij")
+    xi = np.column_stack([X.ravel(), Y.ravel()])
+    if face_type == "tri":
+        xi = xi[xi.sum(axis=1) <= 1.0]
+    N, _ = fem.SHAPE[face_type](xi)
+    return np.linalg.norm(N @ face - point, axis=1).min()
+
+
+@pytest.mark.parametrize("face_type", ["quad", "tri"])
+def test_projection_outside_points_match_brute_force(face_type):
+    """Points anywhere around a face shall get its true closest point (checked against dense sampling)."""
+    rng = np.random.default_rng(2)
+    faces = np.array([random_warped_quad(rng) for _ in range(40)])
+    if face_type == "tri":
+        faces = faces[:, :3]
+    pts = rng.uniform(-0.8, 1.8, (40, 3))
+    pr = project_on_faces(pts, faces, face_type)
+    N, _ = fem.SHAPE[face_type](pr.xi)
+    np.testing.assert_allclose(np.einsum("pv,pvi->pi", N, faces), pr.closest, atol=1e-14)
+    np.testing.assert_allclose(np.linalg.norm(pts - pr.closest, axis=1), pr.distance, atol=1e-14)
+    for p, f, d in zip(pts, faces, pr.distance):
+        b = brute_force_distance(p, f, face_type)
+        assert d <= b + 1e-12
+        assert b - d < 2e-5
+    assert (~pr.inside).any()
+
+
+def test_projection_triangle_edges_and_vertices():
+    """Points in the vertex and edge regions of a triangle shall be clamped to that vertex or edge in closed form."""
+    tri = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+    pts = np.array([[-1.0, -1.0, 0.5],     # vertex 0
+                    [2.0, -0.5, 0.1],      # vertex 1
+                    [-0.3, 1.5, -0.2],     # vertex 2
+                    [0.5, -1.0, 0.3],      # edge 0-1
+                    [1.0, 1.0, 0.2],       # edge 1-2
+                    [-0.7, 0.25, 0.0],     # edge 2-0
+                    [0.2, 0.3, -0.4],      # interior
+                    [0.5, 0.5, 0.0]])      # exactly on edge 1-2
+    xi = np.array([[0, 0], [1, 0], [0, 1], [0.5, 0], [0.5, 0.5], [0, 0.25], [0.2, 0.3], [0.5, 0.5]])
+    inside = [False, False, False, False, False, False, True, True]
+    pr = project_on_faces(pts, np.repeat(tri[None], len(pts), axis=0), "tri")
+    np.testing.assert_allclose(pr.xi, xi, atol=1e-15)
+    np.testing.assert_array_equal(pr.inside, inside)
+    np.testing.assert_allclose(pr.normal, np.tile([0, 0, 1.0], (len(pts), 1)))
+    np.testing.assert_allclose(pr.distance, np.linalg.norm(pts - np.column_stack([xi, 0 * xi[:, 0]]), axis=1))
+
+
+def test_projection_quad_edge_and_vertex_clamping():
+    """Points beyond a quad's edges or corners shall project on the edge point or corner exactly."""
+    quad = np.array([[0.0, 0, 0], [2, 0, 0], [2, 1, 0.3], [0, 1, 0.3]])      # a plane quad, sloped
+    pts = np.array([[1.0, -1.0, 0.0], [3.0, -1.0, 0.0], [-1.0, 2.0, 1.0], [3.0, 0.5, -0.5]])
+    pr = project_on_faces(pts, np.repeat(quad[None], 4, axis=0), "quad")
+    np.testing.assert_allclose(pr.xi[:3], [[0, -1], [1, -1], [-1, 1]], atol=1e-15)
+    assert pr.xi[3, 0] == 1.0 and not pr.inside.any()
+
+
+# ---------------------------------------------------------------- search
+
+def dense_pairs(points, lo, hi, radius):
+    inside = ((points[:, None] >= lo[None] - radius) & (points[:, None] <= hi[None] + radius)).all(axis=2)
+    return set(zip(*np.nonzero(inside)))
+
+
+@pytest.mark.parametrize("radius", [0.0, 0.03, 0.4])
+def test_candidate_pairs_equal_brute_force(radius):
+    """The bucket grid shall return exactly the (point, face) pairs of the all-pairs box test, sorted."""
+    rng = np.random.default_rng(3)
+    lo = rng.uniform(-1, 1, (300, 3))
+    hi = lo + rng.uniform(0, 0.3, (300, 3)) * rng.choice([0.1, 1, 5], (300, 1))
+    pts = rng.uniform(-1.5, 1.5, (700, 3))
+    pts[:50] = lo[:50]                     # points on box corners and faces
+    pts[50:100, 0] = hi[50:100, 0] + radius
+    pi, fi = candidate_pairs(pts, lo, hi, radius)
+    assert set(zip(pi, fi)) == dense_pairs(pts, lo, hi, radius)
+    assert len(set(zip(pi, fi))) == len(pi)
+    assert (np.diff(pi) >= 0).all()
+    # integer data: many points exactly on box boundaries
+    lo = rng.integers(0, 10, (200, 3)).astype(float)
+    hi = lo + rng.integers(0, 3, (200, 3))
+    pts = rng.integers(-1, 13, (500, 3)).astype(float)
+    pi, fi = candidate_pairs(pts, lo, hi, radius)
+    assert set(zip(pi, fi)) == dense_pairs(pts, lo, hi, radius)
+
+
+def test_candidate_pairs_empty():
+    z = np.zeros((0, 3))
+    for args in [(z, np.ones((2, 3)), np.ones((2, 3))), (np.ones((2, 3)), z, z)]:
+        pi, fi = candidate_pairs(*args, 0.1)
+        assert len(pi) == len(fi) == 0
+    pi, fi = candidate_pairs(np.full((3, 3), 100.0), np.zeros((2, 3)), np.ones((2, 3)), 0.1)
+    assert len(pi) == 0
+
+
+def tie_points(S):
+    """Grid nodes, edge midpoints and points hovering over them: every one ties between several faces."""
+    xf = S.xyz[S.faces]
+    mids = 0.5 * (xf + np.roll(xf, -1, axis=1)).reshape(-1, 3)
+    return np.concatenate([S.xyz, mids, S.xyz + [0, 0, 0.01], mids - [0, 0, 0.01]])
+
+
+@pytest.mark.parametrize("face_type", ["quad", "tri"])
+def test_tie_rule_is_independent_of_face_order_and_subset(face_type):
+    """Points on shared edges and vertices shall pick the same face (smallest key) for any order or superset of faces."""
+    S = Surface(4, face_type, warp, 100, down=True)
+    pts = tie_points(S)
+    key = np.sort(S.gfaces, axis=1)
+    xf = S.xyz[S.faces]
+    ref = closest_faces(pts, xf, face_type, key, 0.2)
+    assert (ref["face"] >= 0).all()
+    # genuinely ties: several faces at (nearly) the same distance
+    pi, fi = candidate_pairs(pts, xf.min(axis=1), xf.max(axis=1), 0.2)
+    pr = project_on_faces(pts[pi], xf[fi], face_type)
+    close = pr.distance <= ref["distance"][pi] + 1e-9 * S.face_size[fi]
+    nties = np.bincount(pi[close], minlength=len(pts))
+    assert (nties >= 2).sum() > len(S.xyz)
+    # the winner has the smallest key among its ties
+    for i in np.flatnonzero(nties >= 2)[:50]:
+        tied = fi[close & (pi == i)]
+        best = min(tuple(k) for k in key[tied])
+        assert tuple(key[ref["face"][i]]) == best
+    rng = np.random.default_rng(4)
+    for trial in range(5):
+        perm = rng.permutation(len(xf))
+        if trial >= 3:          # a rank that holds only some faces (all those within radius of its points)
+            perm = perm[: 3 * len(perm) // 4]
+        sub = np.flatnonzero(np.isin(ref["face"], perm))
+        got = closest_faces(pts[sub], xf[perm], face_type, key[perm], 0.2)
+        if trial < 3:
+            assert len(sub) == len(pts)
+        np.testing.assert_array_equal(perm[got["face"]], ref["face"][sub])
+        for k in ["xi", "shape", "normal", "distance", "signed_gap", "inside"]:
+            np.testing.assert_array_equal(got[k], ref[k][sub])
+
+
+def test_tie_rule_on_a_kinked_ridge():
+    """Over the ridge of a roof, the normal shall come from the face with the smallest key, whatever the order."""
+    x = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [-1, 0, -1], [-1, 1, -1], [2, 0, -1], [2, 1, -1]],
+                 dtype=float)
+    faces = np.array([[4, 0, 3, 5], [0, 1, 2, 3], [1, 6, 7, 2]])            # left slope, flat top, right slope
+    ids = np.array([7, 3, 9, 1, 8, 2, 5, 6])
+    key = np.sort(ids[faces], axis=1)
+    pts = np.array([[-0.3, 0.5, 0.3], [1.3, 0.5, 0.3], [0.0, 0.5, 0.0], [1.0, 0.2, 0.0]])
+    ref = closest_faces(pts, x[faces], "quad", key, 2.0)
+    for perm in [[2, 1, 0], [1, 2, 0], [0, 2, 1]]:
+        got = closest_faces(pts, x[faces][perm], "quad", key[perm], 2.0)
+        np.testing.assert_array_equal(np.array(perm)[got["face"]], ref["face"])
+        np.testing.assert_array_equal(got["normal"], ref["normal"])
+    # the point over the left ridge is equidistant to the left slope and the top: smallest key wins
+    k0, k1 = tuple(key[0]), tuple(key[1])
+    assert ref["face"][0] == (0 if k0 < k1 else 1)
+    assert ref["signed_gap"][0] > 0
+
+
+def test_closest_faces_radius_and_signed_gap():
+    """Points beyond the radius find no face; signed_gap is + when apart and - when penetrating."""
+    S = Surface(3, "quad", flat, 0)
+    pts = np.array([[0.5, 0.5, 0.1], [0.5, 0.5, -0.05], [0.5, 0.5, 0.5]])
+    out = closest_faces(pts, S.xyz[S.faces], "quad", np.sort(S.gfaces, axis=1), 0.2)
+    np.testing.assert_array_equal(out["face"] >= 0, [True, True, False])
+    np.testing.assert_allclose(out["signed_gap"][:2], [0.1, -0.05])
+
+
+# ---------------------------------------------------------------- rows
+
+def linearisation_error(S, T, ndof, scale):
+    """max |C_r / W_r + signed gap after moving the nodes by u| over nodes projecting well inside a face."""
+    u = scale * np.random.default_rng(5).standard_normal((ndof // 3, 3))
+    G, g, W, r, _ = dense(master_slave(make_pass(S, T)), ndof)
+    h = (G @ u.ravel() - g) / W
+    moved = closest_faces(S.xyz + u[S.ids], (T.xyz + u[T.ids])[T.faces], T.type, np.sort(T.gfaces, axis=1), 0.2)
+    k = r // 3 - S.ids[0]
+    xi = moved["xi"][k]
+    lo = 0.0 if T.type == "tri" else -1.0
+    ok = (xi > lo + 0.02).all(axis=1) & (xi < 0.98).all(axis=1)
+    if T.type == "tri":
+        ok &= xi.sum(axis=1) < 0.98
+    assert ok.sum() >= 2
+    return np.abs(h[ok] + moved["signed_gap"][k][ok]).max()
+
+
+@pytest.mark.parametrize("mesh", MESH_PAIRS)
+def test_penetration_is_the_linearised_signed_gap(mesh):
+    """C_r / W_r of a pass shall be minus the signed gap recomputed after a displacement u, up to O(|u|^2)."""
+    A, B, ndof = pair(*mesh, gap=0.01)
+    for S, T in [(A, B), (B, A)]:
+        e5, e6 = linearisation_error(S, T, ndof, 1e-5), linearisation_error(S, T, ndof, 1e-6)
+        assert e6 < 1e-10
+        assert 50 < e5 / e6 < 200          # second order: the first-order terms are exact
+
+
+@pytest.mark.parametrize("mesh", MESH_PAIRS)
+@pytest.mark.parametrize("name", FORMULATIONS)
+def test_force_and_jacobian_are_derivatives(name, mesh):
+    """For every formulation, G^T m shall be the gradient of the energy and G^T diag(d) G the gradient of the force."""
+    A, B, ndof = pair(*mesh)
+    rows = FORMULATIONS[name](make_pass(A, B), make_pass(B, A))
+    u = away_from_kinks(rows, ndof, 0.01, seed=10)
+    check_derivatives(rows, ndof, u)
+
+
+def test_augmented_lagrangian_derivatives_and_uzawa():
+    """With multipliers, force and Jacobian shall still be the derivatives; Uzawa shall clamp at zero."""
+    A, B, ndof = pair(3, "quad", 4, "tri")
+    rows = quasi_symmetric(make_pass(A, B), make_pass(B, A), "finer")
+    r = len(dense(rows, ndof)[3])
+    lmbda = np.abs(np.random.default_rng(6).standard_normal(r)) * EPS_N * 0.005
+    u = away_from_kinks(rows, ndof, 0.01, seed=20, lmbda=lmbda)
+    check_derivatives(rows, ndof, u, lmbda=lmbda)
+    np.testing.assert_allclose(multipliers_update([1.0, 1.0, 0.0, 2.0], [0.5, -2.0, 1.0, 1.0], [1.0, 1.0, 2.0, 0.0],
+                                                  2.0), [2.0, 0.0, 1.0, 0.0])
+
+
+def test_closed_set_start_and_missing_rows():
+    """Rows at c = -tol shall be active with zero force; rows with W = 0 shall not exist."""
+    e, m, d, act = row_response([-1e-14, -1e-3, 0.2, 5.0], [1.0, 1.0, 2.0, 0.0], 10.0, 0.5, closed_tol=1e-12)
+    np.testing.assert_array_equal(act, [True, False, True, False])
+    np.testing.assert_allclose(m, [0.0, 0.0, 0.5 * 10 * 0.1, 0.0])
+    np.testing.assert_allclose(d, [5.0, 0.0, 2.5, 0.0])
+    np.testing.assert_allclose(e, 0.5 * 10 / 4 * 0.04)
+    _, _, _, act = row_response([-1e-14], [1.0], 10.0, 1.0)
+    assert not act[0]
+
+
+@pytest.mark.parametrize("slave_type,master_type", [("quad", "quad"), ("tri", "quad"), ("quad", "tri")])
+def test_sum_phi_W_is_the_contact_area(slave_type, master_type):
+    """On flat interfaces fully in contact, sum_r phi W_r shall be the contact area for every formulation."""
+    for nA, nB in [(3, 4), (4, 3), (2, 7)]:
+        A, B, _ = pair(nA, slave_type, nB, master_type, zfun=flat)
+        sp, mp = make_pass(A, B), make_pass(B, A)
+        assert len(sp.node) == len(A.ids) and len(mp.node) == len(B.ids)
+        for name, build in FORMULATIONS.items():
+            rows = build(sp, mp)
+            assert rows.phi * rows.W_vals.sum() == pytest.approx(1.0, rel=1e-13), name
+
+
+def tilt_matrix():
+    a, b = 0.3, -0.2
+    Rx = np.array([[1, 0, 0], [0, np.cos(a), -np.sin(a)], [0, np.sin(a), np.cos(a)]])
+    Ry = np.array([[np.cos(b), 0, np.sin(b)], [0, 1, 0], [-np.sin(b), 0, np.cos(b)]])
+    return Ry @ Rx
+
+
+@pytest.mark.parametrize("face_type", ["quad", "tri"])
+def test_matching_meshes_give_identical_rows(face_type):
+    """On matching meshes the three formulations shall give identical C_r / W_r (and energies)."""
+    A, B, ndof = pair(3, face_type, 3, face_type, zfun=flat, gap=0.003, tilt=tilt_matrix())
+    sp, mp = make_pass(A, B), make_pass(B, A)
+    u = 0.01 * np.random.default_rng(7).standard_normal(ndof)
+    mean = {}
+    for name, build in FORMULATIONS.items():
+        G, g, W, r, _ = dense(build(sp, mp), ndof)
+        mean[name] = dict(zip(r // 3, (G @ u - g) / W))
+    ref = mean["master_slave"]
+    assert sorted(ref) == list(A.ids)
+    for name, rows_mean in mean.items():
+        for v, h in rows_mean.items():
+            partner = v if v in ref else v - len(A.ids)          # B node v sits on A node v - nA
+            assert h == pytest.approx(ref[partner], abs=1e-14), (name, v)
+    energies = [response(build(sp, mp), ndof, u)[0] for build in FORMULATIONS.values()]
+    np.testing.assert_allclose(energies, energies[0], rtol=1e-12)
+
+
+def test_quasi_symmetric_weight_one_is_master_slave():
+    """quasi_symmetric with w_a = 1 shall reproduce master_slave's C/W, energy, force and Jacobian."""
+    A, B, ndof = pair(3, "quad", 4, "tri")
+    sp, mp = make_pass(A, B), make_pass(B, A)
+    u = away_from_kinks(master_slave(sp), ndof, 0.01, seed=30)
+    ms, qs = master_slave(sp), quasi_symmetric(sp, mp, 1.0)
+    Gm, gm, Wm, rm, _ = dense(ms, ndof)
+    Gq, gq, Wq, rq, _ = dense(qs, ndof)
+    np.testing.assert_array_equal(rm, rq)
+    np.testing.assert_allclose((Gq @ u - gq) / Wq, (Gm @ u - gm) / Wm, atol=1e-15)
+    for a, b in zip(response(ms, ndof, u)[:3], response(qs, ndof, u)[:3]):
+        np.testing.assert_allclose(a, b, rtol=1e-13, atol=1e-13)
+
+
+@pytest.mark.parametrize("weight", [0.5, 0.0, "finer"])
+def test_quasi_symmetric_equals_paper_formula(weight):
+    """Each slave row shall be 2 w_a A_k h_k + 2 w_b sum_l N_a^k(xi_a^l) B_l h_l, computed here node by node."""
+    A, B, ndof = pair(4, "tri", 3, "quad", gap=0.002)         # the slave (A) finer than the master
+    sp, mp = make_pass(A, B), make_pass(B, A)
+    u = 0.01 * np.random.default_rng(8).standard_normal((ndof // 3, 3))
+    C = np.zeros(ndof // 3)
+    Wref = np.zeros(ndof // 3)
+    for k in range(len(sp.node)):
+        h = -(u[sp.node[k]] - sp.shape[k] @ u[sp.target_nodes[k]]) @ sp.normal[k] - sp.delta0[k]
+        w_a = weights(weight, sp.size[k], sp.target_size[k])
+        C[sp.node[k]] += 2 * w_a * sp.area[k] * h
+        Wref[sp.node[k]] += 2 * w_a * sp.area[k]
+    for l in range(len(mp.node)):
+        h = -(u[mp.node[l]] - mp.shape[l] @ u[mp.target_nodes[l]]) @ mp.normal[l] - mp.delta0[l]
+        w_b = 1 - weights(weight, mp.target_size[l], mp.size[l])
+        for k, N in zip(mp.target_nodes[l], mp.shape[l]):
+            C[k] += 2 * w_b * N * mp.area[l] * h
+            Wref[k] += 2 * w_b * N * mp.area[l]
+    rows = quasi_symmetric(sp, mp, weight)
+    G, g, W, r, _ = dense(rows, ndof)
+    assert set(r // 3) <= set(A.ids)
+    np.testing.assert_array_equal(r // 3, np.flatnonzero(Wref > 0))
+    np.testing.assert_allclose(G @ u.ravel() - g, C[r // 3], atol=1e-15)
+    np.testing.assert_allclose(W, Wref[r // 3], rtol=1e-14)
+
+
+def test_finer_weight_rule():
+    """The "finer" rule shall weight the finer side and be symmetric under swapping slave and master."""
+    assert weights("finer", 1.0, 1.0) == 0.5
+    assert weights("finer", 0.1, 1.0) > 0.999 and weights("finer", 1.0, 0.1) < 1e-3
+    np.testing.assert_allclose(weights("finer", [0.3, 2.0], [0.7, 1.0]) + weights("finer", [0.7, 1.0], [0.3, 2.0]), 1)
+    np.testing.assert_array_equal(weights(0.25, np.ones(3), np.ones(3)), 0.25)
+    for bad in [1.5, -0.1, "coarser"]:
+        with pytest.raises(ValueError):
+            weights(bad, 1.0, 1.0)
+
+
+# ---------------------------------------------------------------- die
+
+DIE = {"point": np.array([0.1, -0.2, 0.12]), "normal": np.array([0.1, -0.2, -1.0]) / np.sqrt(1.05),
+       "u_die": np.array([0.01, -0.02, -0.1])}
+
+
+def die_setup(sticking):
+    S = Surface(3, "quad", warp, 0)
+    return S, die_rows(S.ids, S.area, S.xyz, DIE["point"], DIE["normal"], DIE["u_die"], sticking), 3 * len(S.ids)
+
+
+def test_die_penetration_is_exact():
+    """A die row's C/W shall be the penetration of the moved node through the moved plane."""
+    S, rows, ndof = die_setup(False)
+    u = 0.02 * np.random.default_rng(9).standard_normal((len(S.ids), 3))
+    G, g, W, r, _ = dense(rows, ndof)
+    pen = -((S.xyz + u - DIE["point"] - DIE["u_die"]) @ DIE["normal"])
+    np.testing.assert_allclose((G @ u.ravel() - g) / W, pen, atol=1e-15)
+    np.testing.assert_allclose(W, S.area)
+    assert rows.phi == 1.0 and len(rows.gate_rows) == 0
+    # sticking adds rows 3v+1, 3v+2 measuring the tangential slip relative to the die, gated by row 3v
+    _, stick, _ = die_setup(True)
+    G, g, W, r, gate = dense(stick, ndof)
+    c = (G @ u.ravel() - g) / W
+    np.testing.assert_array_equal(r[gate >= 0] // 3, r[gate[gate >= 0]] // 3)
+    np.testing.assert_array_equal(r[gate < 0] % 3, 0)
+    rel = u - DIE["u_die"]
+    slip = rel - np.outer(rel @ DIE["normal"], DIE["normal"])
+    np.testing.assert_allclose(np.hypot(c[r % 3 == 1], c[r % 3 == 2]), np.linalg.norm(slip, axis=1), atol=1e-15)
+
+
+@pytest.mark.parametrize("sticking", [False, True])
+def test_die_force_and_jacobian_are_derivatives(sticking):
+    """Die rows (frictionless and sticking) shall have consistent energy, force and Jacobian."""
+    _, rows, ndof = die_setup(sticking)
+    G, g, W, _, gate = dense(rows, ndof)
+    u = away_from_kinks(_normal_rows(rows), ndof, 0.02, seed=40)
+    act = response(rows, ndof, u)[3]
+    if sticking:
+        np.testing.assert_array_equal(act[gate >= 0], act[gate[gate >= 0]])
+    check_derivatives(rows, ndof, u)
+    if sticking:
+        # an active sticking node is held tangentially: the row force is along t and of either sign
+        m = row_response(G @ u - g, W, EPS_N, 1.0, gate_of=gate)[1]
+        eq = gate >= 0
+        assert (m[eq][act[eq]] != 0).all() and (m[eq][~act[eq]] == 0).all()
+        assert (m[eq] < 0).any() and (m[eq] > 0).any()
+
+
+def _normal_rows(rows):
+    """The die rows without their gated tangential rows (the kinks live only in the normal rows)."""
+    keep = rows.G_rows % 3 == 0
+    kg, kw = rows.g_rows % 3 == 0, rows.W_rows % 3 == 0
+    return Rows(rows.G_rows[keep], rows.G_cols[keep], rows.G_vals[keep], rows.g_rows[kg], rows.g_vals[kg],
+                rows.W_rows[kw], rows.W_vals[kw], rows.phi)
+
+
+def test_concat_folds_phi():
+    """Concatenating rows with different phi shall keep every energy, force and Jacobian."""
+    A, B, ndof = pair(3, "quad", 4, "quad")
+    qs = quasi_symmetric(make_pass(A, B), make_pass(B, A))
+    die = die_rows(B.ids, B.area, B.xyz, [0, 0, 0.2], [0, 0, 1.0], [0, 0, 0.15], sticking=True)
+    both = Rows.concat(qs, die)
+    assert both.phi == 1.0
+    u = 0.01 * np.random.default_rng(11).standard_normal(ndof)
+    a, b, c = response(qs, ndof, u), response(die, ndof, u), response(both, ndof, u)
+    assert c[0] == pytest.approx(a[0] + b[0], rel=1e-13)
+    np.testing.assert_allclose(c[1], a[1] + b[1], atol=1e-12)
+    np.testing.assert_allclose(c[2], a[2] + b[2], atol=1e-9)
+    assert (both.phi * both.W_vals).sum() == pytest.approx(qs.phi * qs.W_vals.sum() + die.W_vals.sum())
+
+
+def test_empty_inputs():
+    """A rank with no contact nodes or no opposite faces shall get empty, well-typed results."""
+    A, B, _ = pair(3, "quad", 4, "quad")
+    found = closest_faces(np.zeros((0, 3)), B.xyz[B.faces], "quad", np.sort(B.gfaces, axis=1), 0.1)
+    none = Pass.from_search(A.ids[:0], A.area[:0], A.size[:0], found, B.gfaces, B.face_size)
+    far = closest_faces(A.xyz + [0, 0, 5], B.xyz[B.faces], "quad", np.sort(B.gfaces, axis=1), 0.1)
+    assert (far["face"] == -1).all()
+    assert len(Pass.from_search(A.ids, A.area, A.size, far, B.gfaces, B.face_size).node) == 0
+    mp = make_pass(B, A)
+    for build in FORMULATIONS.values():
+        rows = build(none, none)
+        assert len(rows.G_rows) == len(rows.W_rows) == 0 and rows.G_rows.dtype == np.int64
+    # master nodes only: the slave rows of quasi_symmetric come from the second term alone
+    rows = quasi_symmetric(none, mp, 0.5)
+    assert set(rows.W_rows // 3) <= set(A.ids) and rows.phi * rows.W_vals.sum() == pytest.approx(0.5 * mp.area.sum(), rel=1e-13)
+    e, m, d, act = row_response(np.zeros(0), np.zeros(0), EPS_N, 0.5, closed_tol=0.0, lmbda=np.zeros(0),
+                                gate_of=np.zeros(0, dtype=np.int64))
+    assert e == 0.0 and len(m) == len(d) == len(act) == 0
+
+
+def test_gate_positions():
+    rows = np.array([30, 31, 32, 7, 3, 4, 5])
+    got = gate_positions(rows, [31, 32, 4, 5, 100], [30, 30, 3, 3, 99])
+    np.testing.assert_array_equal(got, [-1, 0, 0, -1, -1, 4, 4])
+    with pytest.raises(ValueError):
+        gate_positions(np.array([31, 7]), [31], [30])

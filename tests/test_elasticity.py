@@ -1,0 +1,131 @@
+"""Tests of the linear elasticity element kernels: energy derivatives, rigid modes, patch tests, fast path."""
+
+import numpy as np
+import pytest
+
+from qsc_petsc import elasticity as el
+from qsc_petsc.errors import MeshError
+
+E, NU = 210e9, 0.3                     # Pa, -
+LMBDA, MU = el.lame(E, NU)
+HEX_REF = np.array([[0.0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0],
+                    [0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]])  # unit cube in VTK order
+TET_REF = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]])
+
+
+def _rotation(rng):
+    q, r = np.linalg.qr(rng.standard_normal((3, 3)))
+    q *= np.sign(np.diag(r))
+    return q if np.linalg.det(q) > 0 else -q
+
+
+def distorted_cells(cell_type, m, seed=0):
+    """m randomly distorted, rotated, scaled (mm-sized) and shifted cells with positive volume."""
+    rng = np.random.default_rng(seed)
+    ref = HEX_REF if cell_type == "hex" else TET_REF
+    x = ref[None] + 0.15 * rng.uniform(-1, 1, (m,) + ref.shape)
+    x = np.einsum("mai,mji->maj", x, np.stack([_rotation(rng) for _ in range(m)]))
+    return 1e-3 * (x * rng.uniform(0.5, 2.0, (m, 1, 1)) + rng.uniform(-5, 5, (m, 1, 3)))
+
+
+def affine_displacement(xe, A, c=None):
+    """Nodal displacements (m, 3n) of u(x) = A x + c."""
+    u = xe @ A.T + (0.0 if c is None else c)
+    return u.reshape(len(xe), -1)
+
+
+def voigt_strain(A):
+    eps = 0.5 * (A + A.T)
+    return np.array([eps[0, 0], eps[1, 1], eps[2, 2], 2 * eps[1, 2], 2 * eps[0, 2], 2 * eps[0, 1]])
+
+
+def test_lame_and_uniaxial_compliance():
+    D = el.elasticity_matrix(LMBDA, MU)
+    eps = np.linalg.solve(D, [1e6, 0, 0, 0, 0, 0])
+    assert eps[0] == pytest.approx(1e6 / E)
+    assert eps[1] == pytest.approx(-NU * 1e6 / E) and eps[2] == pytest.approx(-NU * 1e6 / E)
+    assert np.allclose(eps[3:], 0.0)
+
+
+@pytest.mark.parametrize("cell_type", ["hex", "tet"])
+def test_stiffness_is_hessian_of_strain_energy(cell_type):
+    xe = distorted_cells(cell_type, 2, seed=1)
+    nd = 3 * xe.shape[1]
+    K = el.stiffness(cell_type, xe, LMBDA, MU)
+    rng = np.random.default_rng(2)
+    u0 = 1e-6 * rng.standard_normal((2, nd))
+    h = 1e-6
+    # central second differences are exact for a quadratic energy up to round-off
+    e = h * np.eye(nd)
+    for c in range(2):
+        up = u0[c] + e[:, None, :] + e[None, :, :]
+        um = u0[c] - e[:, None, :] - e[None, :, :]
+        pm = u0[c] + e[:, None, :] - e[None, :, :]
+        mp = u0[c] - e[:, None, :] + e[None, :, :]
+        u = np.concatenate([a.reshape(-1, nd) for a in (up, um, pm, mp)])
+        W = el.strain_energy(cell_type, np.repeat(xe[c:c + 1], len(u), axis=0), u, LMBDA, MU)
+        W = W.reshape(4, nd, nd)
+        K_fd = (W[0] + W[1] - W[2] - W[3]) / (4 * h * h)
+        assert np.allclose(K[c], K_fd, rtol=1e-5, atol=1e-6 * np.abs(K[c]).max())
+
+
+@pytest.mark.parametrize("cell_type", ["hex", "tet"])
+def test_stiffness_symmetric_with_rigid_body_kernel(cell_type):
+    xe = distorted_cells(cell_type, 5, seed=3)
+    K = el.stiffness(cell_type, xe, LMBDA, MU)
+    scale = np.abs(K).max(axis=(1, 2))[:, None]
+    assert np.allclose(K, K.transpose(0, 2, 1), atol=1e-13 * scale.max())
+    rng = np.random.default_rng(4)
+    for _ in range(3):
+        omega, c = rng.standard_normal(3), rng.standard_normal(3)
+        W = np.array([[0, -omega[2], omega[1]], [omega[2], 0, -omega[0]], [-omega[1], omega[0], 0]])
+        r = affine_displacement(xe, W, c)                  # u = omega x x + c
+        f = np.einsum("mab,mb->ma", K, r)
+        assert np.abs(f).max(axis=1) == pytest.approx(0.0, abs=1e-12 * scale.max())
+    # exactly six zero eigenvalues per cell
+    ev = np.linalg.eigvalsh(K) / scale
+    assert ((np.abs(ev) < 1e-10).sum(axis=1) == 6).all()
+
+
+@pytest.mark.parametrize("cell_type", ["hex", "tet"])
+def test_uniform_strain_gives_exact_stress(cell_type):
+    xe = distorted_cells(cell_type, 6, seed=5)
+    rng = np.random.default_rng(6)
+    A = 1e-3 * rng.standard_normal((3, 3))
+    ue = affine_displacement(xe, A, rng.standard_normal(3))
+    eps = voigt_strain(A)
+    sigma = el.elasticity_matrix(LMBDA, MU) @ eps
+    assert np.allclose(el.cell_stress(cell_type, xe, ue, LMBDA, MU), sigma, rtol=1e-9, atol=1e-9 * abs(sigma).max())
+    xi, w = el.QUADRATURE[cell_type]
+    B, detJ = el.strain_displacement(cell_type, xe, xi)
+    assert np.allclose(B @ ue[:, None, :, None], eps[:, None], atol=1e-12)
+    volume = detJ @ w
+    assert np.allclose(el.strain_energy(cell_type, xe, ue, LMBDA, MU), 0.5 * eps @ sigma * volume, rtol=1e-10)
+
+
+@pytest.mark.parametrize("cell_type", ["hex", "tet"])
+def test_fast_path_equals_general_path(cell_type):
+    rng = np.random.default_rng(7)
+    shapes = distorted_cells(cell_type, 3, seed=8)
+    which = rng.integers(0, 3, 200)
+    xe = shapes[which] + rng.uniform(-1, 1, (200, 1, 3))          # translates of 3 shapes
+    lmbda = np.where(rng.random(200) < 0.5, LMBDA, 2 * LMBDA)   # two materials
+    first, _ = el._translate_groups(xe)
+    assert len(first) < 20      # round-off may split a shape in two bins, never merge two shapes
+    K_fast = el.stiffness(cell_type, xe, lmbda, MU)
+    K_gen = el.stiffness(cell_type, xe, lmbda, MU, share_translates=False)
+    assert np.allclose(K_fast, K_gen, rtol=1e-9, atol=1e-9 * np.abs(K_gen).max())
+
+
+@pytest.mark.parametrize("cell_type", ["hex", "tet"])
+@pytest.mark.parametrize("share", [True, False])
+def test_inverted_cell_raises(cell_type, share):
+    xe = np.repeat(distorted_cells(cell_type, 1, seed=9), 5, axis=0) + np.arange(5)[:, None, None]
+    xe[3] = xe[3][[1, 0] + list(range(2, xe.shape[1]))] if cell_type == "tet" else xe[3][[4, 5, 6, 7, 0, 1, 2, 3]]
+    with pytest.raises(MeshError, match=f"{cell_type} cell 3 "):
+        el.stiffness(cell_type, xe, LMBDA, MU, share_translates=share)
+
+
+def test_von_mises():
+    s = np.array([[-3e6, 0, 0, 0, 0, 0], [0, 0, 2e6, 0, 0, 0], [1e6, 1e6, 1e6, 0, 0, 0], [0, 0, 0, 0, 0, 1e6]])
+    assert np.allclose(el.von_mises(s), [3e6, 2e6, 0.0, np.sqrt(3) * 1e6])

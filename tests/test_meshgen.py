@@ -1,0 +1,163 @@
+"""Tests of body mesh generation and reading: box topology, named faces, conformity, meshio round trips."""
+
+import meshio
+import numpy as np
+import pytest
+
+from qsc_petsc import fem
+from qsc_petsc.errors import MeshError
+from qsc_petsc.meshgen import BOX_SURFACES, boundary_faces, box_mesh, read_mesh_file
+
+ORIGIN, SIZE, CELLS = (1.0, -2.0, 0.5), (2.0, 1.0, 3.0), (3, 2, 4)
+OUTWARD = dict(zip(BOX_SURFACES, np.vstack([-np.eye(3), np.eye(3)])[[0, 3, 1, 4, 2, 5]]))
+
+
+def cell_volumes(mesh):
+    """Volumes (m,) by 2x2x2 Gauss on hexes, exactly on tets."""
+    if mesh.cell_type == "tet":
+        x = mesh.points[mesh.cells]
+        return np.linalg.det(x[:, 1:] - x[:, :1]) / 6.0
+    xi, w = fem.gauss_hex(2)
+    _, dN = fem.shape_hex(xi)
+    return np.linalg.det(np.einsum("mai,qak->mqik", mesh.points[mesh.cells], dN)) @ w
+
+
+def face_coords(mesh, rows):
+    return mesh.points[fem.cell_faces(mesh.cell_type, mesh.cells[rows[:, 0]], rows[:, 1])]
+
+
+def node_sets(mesh, rows):
+    """Faces as a set of sorted point-coordinate tuples, independent of numbering."""
+    return {tuple(sorted(map(tuple, np.round(f, 12)))) for f in face_coords(mesh, rows)}
+
+
+@pytest.mark.parametrize("element, per_hex", [("hex", 1), ("tet", 6)])
+def test_box_counts_and_volume(element, per_hex):
+    mesh = box_mesh(ORIGIN, SIZE, CELLS, element)
+    nx, ny, nz = CELLS
+    assert mesh.cell_type == element
+    assert mesh.points.shape == ((nx + 1) * (ny + 1) * (nz + 1), 3)
+    assert mesh.cells.shape == (per_hex * nx * ny * nz, fem.CELL_NODES[element])
+    assert mesh.cells.dtype == np.int64 and all(s.dtype == np.int64 for s in mesh.surfaces.values())
+    assert sorted(mesh.surfaces) == sorted(BOX_SURFACES)
+    quads = {"xmin": ny * nz, "ymin": nx * nz, "zmin": nx * ny}
+    for name, rows in mesh.surfaces.items():
+        assert len(rows) == quads[name[0] + "min"] * (1 if element == "hex" else 2)
+    assert np.allclose(mesh.points.min(axis=0), ORIGIN)
+    assert np.allclose(mesh.points.max(axis=0), np.add(ORIGIN, SIZE))
+    vol = cell_volumes(mesh)
+    assert (vol > 0).all()
+    assert vol.sum() == pytest.approx(np.prod(SIZE), rel=1e-12)
+
+
+@pytest.mark.parametrize("element", ["hex", "tet"])
+def test_named_faces_point_outward_and_lie_on_their_side(element):
+    mesh = box_mesh(ORIGIN, SIZE, CELLS, element)
+    face_type = fem.FACE_TYPE[element]
+    for name, rows in mesh.surfaces.items():
+        xf = face_coords(mesh, rows)
+        n, _ = fem.face_normals(face_type, xf, fem.CENTROID[face_type][None])
+        assert np.allclose(n[:, 0], OUTWARD[name], atol=1e-12), name
+        axis = int(np.flatnonzero(OUTWARD[name])[0])
+        plane = ORIGIN[axis] + (SIZE[axis] if name.endswith("max") else 0.0)
+        assert np.allclose(xf[..., axis], plane), name
+
+
+@pytest.mark.parametrize("element", ["hex", "tet"])
+def test_box_is_conforming(element):
+    """Only box-boundary faces belong to one cell: the tet split matches across neighbouring hexes."""
+    mesh = box_mesh(ORIGIN, SIZE, CELLS, element)
+    b = boundary_faces(element, mesh.cells)
+    named = np.concatenate(list(mesh.surfaces.values()))
+    assert len(b) == len(named)
+    assert set(map(tuple, b)) == set(map(tuple, named))
+
+
+def test_box_rejects_bad_arguments():
+    with pytest.raises(MeshError, match="cells"):
+        box_mesh(ORIGIN, SIZE, (2, 0, 1))
+    with pytest.raises(MeshError, match="element"):
+        box_mesh(ORIGIN, SIZE, CELLS, "wedge")
+
+
+def _write_tet_mesh(path, file_format, interior_facet=False):
+    """A tet box written with two named surface groups, one unnamed group, a stray point and inverted tets."""
+    mesh = box_mesh(ORIGIN, SIZE, (2, 2, 2), "tet")
+    cells = mesh.cells.copy()
+    cells[::3] = cells[::3][:, [0, 2, 1, 3]]                       # inverted
+    points = np.vstack([mesh.points, [[9.0, 9.0, 9.0]]])          # unused point
+    tags = {1: "xmin", 2: "zmax", 7: "ymin"}                       # physical (and geometrical) tag -> side
+    tri = {t: fem.cell_faces("tet", mesh.cells[r[:, 0]], r[:, 1]) for t, r in
+           ((t, mesh.surfaces[side]) for t, side in tags.items())}
+    if interior_facet:
+        tri[1] = np.vstack([tri[1], mesh.cells[:1, [1, 2, 3]]])  # on the hex face x = 1, inside the box
+    # the v4 writer takes one gmsh entity per cell block, declared through the nodes' dim_tags
+    dim_tags = np.tile([3, 1], (len(points), 1))
+    for t, f in tri.items():
+        dim_tags[f.ravel()] = [2, t]
+    facet_tags = [np.full(len(f), t) for t, f in tri.items()]
+    out = meshio.Mesh(points, [("tetra", cells)] + [("triangle", f) for f in tri.values()],
+                      cell_data={"gmsh:physical": [np.full(len(cells), 3)] + facet_tags,
+                                 "gmsh:geometrical": [np.full(len(cells), 1)] + facet_tags},
+                      field_data={"left": np.array([1, 2]), "top": np.array([2, 2]), "body": np.array([3, 3])},
+                      point_data={"gmsh:dim_tags": dim_tags})
+    meshio.write(path, out, file_format=file_format, binary=False)
+    return mesh
+
+
+@pytest.mark.parametrize("file_format", ["gmsh22", "gmsh"])
+def test_read_mesh_file_round_trip(tmp_path, file_format):
+    path = tmp_path / "body.msh"
+    ref = _write_tet_mesh(path, file_format)
+    mesh = read_mesh_file(path, scale=2.0)
+    assert mesh.cell_type == "tet" and len(mesh.points) == len(ref.points) and len(mesh.cells) == len(ref.cells)
+    assert np.allclose(np.unique(mesh.points, axis=0), np.unique(2.0 * ref.points, axis=0))  # v4 renumbers nodes
+    assert (cell_volumes(mesh) > 0).all()
+    assert sorted(mesh.surfaces) == ["boundary", "left", "surface7", "top"]
+    ref.points *= 2.0
+    for name, ref_name in [("left", "xmin"), ("top", "zmax"), ("surface7", "ymin")]:
+        assert node_sets(mesh, mesh.surfaces[name]) == node_sets(ref, ref.surfaces[ref_name])
+    assert node_sets(mesh, mesh.surfaces["boundary"]) == node_sets(ref, np.concatenate(list(ref.surfaces.values())))
+    # faces as stored point outward
+    xf = face_coords(mesh, mesh.surfaces["left"])
+    n, _ = fem.face_normals("tri", xf, fem.CENTROID["tri"][None])
+    assert np.allclose(n[:, 0], [-1, 0, 0])
+
+
+def test_read_hex_file_unmirrors_cells(tmp_path):
+    box = box_mesh(ORIGIN, SIZE, CELLS, "hex")
+    cells = box.cells.copy()
+    cells[::2] = cells[::2][:, [4, 5, 6, 7, 0, 1, 2, 3]]             # mirrored in z
+    meshio.write(tmp_path / "hex.vtu", meshio.Mesh(box.points, [("hexahedron", cells)]))
+    mesh = read_mesh_file(tmp_path / "hex.vtu")
+    assert mesh.cell_type == "hex" and list(mesh.surfaces) == ["boundary"]
+    assert (cell_volumes(mesh) > 0).all()
+    assert node_sets(mesh, mesh.surfaces["boundary"]) == node_sets(box, np.concatenate(list(box.surfaces.values())))
+    xf = face_coords(mesh, mesh.surfaces["boundary"])
+    n, _ = fem.face_normals("quad", xf, fem.CENTROID["quad"][None])
+    centre = np.add(ORIGIN, 0.5 * np.asarray(SIZE))
+    assert (np.einsum("ki,ki->k", n[:, 0], xf.mean(axis=1) - centre) > 0).all()
+
+
+def test_surface_facet_not_on_boundary(tmp_path):
+    path = tmp_path / "interior.msh"
+    _write_tet_mesh(path, "gmsh22", interior_facet=True)
+    with pytest.raises(MeshError, match="'left'.*not boundary faces"):
+        read_mesh_file(path)
+
+
+def test_read_errors(tmp_path):
+    garbage = tmp_path / "garbage.msh"
+    garbage.write_bytes(np.random.default_rng(0).bytes(2000))
+    text = tmp_path / "text.msh"
+    text.write_text("this is not a mesh\n")
+    for path in (garbage, text, tmp_path / "missing.msh", tmp_path / "unknown.xyz"):
+        with pytest.raises(MeshError, match="cannot read mesh file") as err:
+            read_mesh_file(path)
+        assert str(path) in str(err.value) and "\n" not in str(err.value)
+
+    mixed = tmp_path / "mixed.vtu"
+    hexes = box_mesh(ORIGIN, SIZE, (1, 1, 1), "hex")
+    meshio.write(mixed, meshio.Mesh(hexes.points, [("hexahedron", hexes.cells), ("tetra", np.array([[0, 1, 3, 4]]))]))
+    with pytest.raises(MeshError, match="all tetra or all hexahedron.*1 hexahedron, 1 tetra"):
+        read_mesh_file(mixed)
