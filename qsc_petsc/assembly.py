@@ -49,12 +49,18 @@ def vertex_graph_counts(mesh):
     a, b = g[:, iu].ravel(), g[:, ju].ravel()
     pairs = np.unique(np.minimum(a, b) * n + np.maximum(a, b))
     lo, hi = pairs // n, pairs % n
-    rows, cols = np.concatenate([lo, hi]), np.concatenate([hi, lo])
+    rows, cols = np.concatenate([lo, hi]), np.concatenate([hi, lo])      # unique on this rank
     starts = ownership_starts(comm, mesh.owned.sum())
-    rows, cols = send_to_owners(comm, starts, rows, cols)
-    directed = np.unique(rows * n + cols)          # the same edge may come from several ranks
-    rows, cols = directed // n, directed % n
     r0, r1 = starts[comm.rank], starts[comm.rank + 1]
+    mine = (rows >= r0) & (rows < r1)
+    got_rows, got_cols = send_to_owners(comm, starts, rows[~mine], cols[~mine])
+    rows, cols = rows[mine], cols[mine]
+    if len(got_rows):
+        # an edge on a partition boundary may come from several ranks: dedupe only the rows that received some
+        shared = np.isin(rows, np.unique(got_rows))
+        merged = np.unique(np.concatenate([rows[shared], got_rows]) * n + np.concatenate([cols[shared], got_cols]))
+        rows = np.concatenate([rows[~shared], merged // n])
+        cols = np.concatenate([cols[~shared], merged % n])
     diag = (cols >= r0) & (cols < r1)
     d = np.bincount(rows[diag] - r0, minlength=r1 - r0) + 1
     o = np.bincount(rows[~diag] - r0, minlength=r1 - r0)

@@ -108,3 +108,42 @@ def test_surfaces_beyond_search_distance(comm, mpi_tmp):
     """Surfaces farther apart than the search distance are an error naming the pair."""
     with pytest.raises(SceneError, match=r"contact\[0\]: no node"):
         run_scene(CONFIGS / "patch_test.toml", mpi_tmp, ["bodies.1.mesh.origin=[0,0,0.9]"], comm)
+
+
+def test_augmented_lagrangian_removes_the_penalty_error(comm, mpi_tmp):
+    """At a soft penalty the Uzawa loop drives the row penetration from p/eps_n to (almost) zero."""
+    base = ["bodies.1.mesh.cells=[4,4,2]", "contact.0.penalty=1e2", "contact.0.augmented_tolerance=1e-9"]
+    pens = []
+    for k, enforcement in enumerate(("penalty", "augmented_lagrangian")):
+        run, summary = run_scene(CONFIGS / "patch_test.toml", mpi_tmp / str(k),
+                                 base + [f"contact.0.enforcement={enforcement}"], comm)
+        assert summary["status"] == "ok"
+        assert stress_zz_error(run) <= 1e-8
+        pair = next(iter(summary["steps"][-1]["contact"].values()))
+        pens.append((pair["mean_penetration_slave"], pair["eps_n"],
+                     summary["steps"][-1]["solves"][-1]["augmented_iterations"]))
+        run.destroy()
+    (pen_p, eps, _), (pen_al, _, outer) = pens
+    assert pen_p == pytest.approx(1.0 / eps, rel=1e-6)
+    assert abs(pen_al) <= 1e-6 * pen_p
+    assert outer >= 2
+
+
+def test_failed_increment_is_cut_and_reported(comm, mpi_tmp):
+    """A load step whose Newton cannot converge is halved max_cutbacks times, then a ConvergenceError names it."""
+    from qsc_petsc.errors import ConvergenceError
+    from qsc_petsc.run import Run
+    from qsc_petsc.scene import load_scene
+    from petsc4py import PETSc
+    opts = PETSc.Options()
+    opts.setValue("qsc_snes_max_it", 1)          # one Newton step cannot settle the active set from a gap
+    try:
+        scene = load_scene(CONFIGS / "patch_test.toml",
+                           ["bodies.1.mesh.origin=[0,0,0.52]", "contact.0.search_distance=2",
+                            "solver.max_cutbacks=2"])
+        run = Run(scene, comm, mpi_tmp, log=lambda *a: None)
+        with pytest.raises(ConvergenceError, match=r"load step 1 .*2 cutbacks.*DIVERGED_MAX_IT"):
+            run.execute()
+        run.destroy()
+    finally:
+        opts.delValue("qsc_snes_max_it")
