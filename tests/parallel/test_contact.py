@@ -147,3 +147,36 @@ def test_failed_increment_is_cut_and_reported(comm, mpi_tmp):
         run.destroy()
     finally:
         opts.delValue("qsc_snes_max_it")
+
+
+def test_rank_without_contact_surface(comm, mpi_tmp):
+    """With a bystander body partitioned in cell order, the last rank owns no contact surface, yet the
+    contact results equal the serial ones (the other ranks split the interface between them)."""
+    from petsc4py import PETSc
+    from qsc_petsc.run import Run
+    from qsc_petsc.scene import load_scene, parse_scene
+    data = load_scene(CONFIGS / "patch_test.toml", ["contact.0.formulation=quasi_symmetric"]).to_dict()
+    data["bodies"].append({"name": "bystander", "mesh": {"type": "box", "origin": [3.0, 0.0, 0.0],
+                                                         "size": [1.0, 1.0, 1.0], "cells": [8, 8, 6]},
+                           "material": {"youngs_modulus": 500.0, "poissons_ratio": 0.2}})
+    data["boundary"].append({"surface": "bystander.zmin", "type": "displacement", "ux": 0.0, "uy": 0.0, "uz": 0.0})
+    data["boundary"].append({"surface": "bystander.zmax", "type": "pressure", "value": 2.0})
+    scene = parse_scene(data, CONFIGS, "bystander")
+    opts = PETSc.Options()
+    opts.setValue("qsc_petscpartitioner_type", "simple")
+    out = []
+    try:
+        for c in (comm, MPI.COMM_SELF):
+            run = Run(scene, c, mpi_tmp / ("w" if c is comm else f"s{comm.rank}"), log=lambda *a: None)
+            if c is comm and comm.size == 3:
+                has_contact = bool(sum(len(run.mesh.surface_faces(s)[0]) for s in ("upper.zmin", "lower.zmax")))
+                owners = comm.allgather(has_contact)
+                assert owners[-1] is False and sum(owners) >= 1
+            s = run.execute()
+            pair = next(iter(s["steps"][-1]["contact"].values()))
+            out.append([s["steps"][-1]["max_abs_displacement"], pair["total_normal_force"],
+                        pair["max_penetration_slave"], pair["max_penetration_master"], float(pair["active_rows"])])
+            run.destroy()
+    finally:
+        opts.delValue("qsc_petscpartitioner_type")
+    assert all_close(comm, np.allclose(out[0], out[1], rtol=1e-8, atol=1e-14))
