@@ -3,6 +3,7 @@
 import sys
 
 PREFIX = "qsc_"
+_AT_START_UP = set()    # option names in the database when PETSc started: command line, PETSC_OPTIONS, .petscrc
 
 
 def split_petsc_args(argv):
@@ -38,6 +39,7 @@ def init_petsc(petsc_args):
     import petsc4py
     petsc4py.init([sys.argv[0]] + list(petsc_args))
     from petsc4py import PETSc
+    _AT_START_UP.update(PETSc.Options().getAll())
     return PETSc
 
 
@@ -54,6 +56,14 @@ def insert_scene_options(scene_options):
     return inserted
 
 
+def remove_options(names):
+    """Take options a scene inserted back out of the database (an in-process run must not leak them)."""
+    from petsc4py import PETSc
+    opts = PETSc.Options()
+    for name in names:
+        opts.delValue(name)
+
+
 def options_in_effect():
     """Every option in the database, as {name: value}."""
     from petsc4py import PETSc
@@ -61,8 +71,8 @@ def options_in_effect():
 
 
 def options_text(options, from_scene):
-    lines = ["# PETSc options in effect (source: scene [petsc] table or command line)"]
+    lines = ["# PETSc options in effect (source: scene [petsc] table, command line or program default)"]
     for name, value in options.items():
-        source = "scene" if name in from_scene else "command line"
+        source = "scene" if name in from_scene else "command line" if name in _AT_START_UP else "program default"
         lines.append(f"-{name} {value}".rstrip() + f"    # {source}")
     return "\n".join(lines) + "\n"

@@ -115,7 +115,7 @@ class Run:
         return arr
 
     def reactions(self, u, t):
-        """Net force [N] that each displacement/symmetry boundary exerts on the body."""
+        """Net force [N] that each displacement/symmetry boundary exerts on the body (its constrained components)."""
         mesh = self.mesh
         dm = mesh.dm
         ul = self.local_displacement(u).ravel()
@@ -127,15 +127,17 @@ class Run:
         r.axpy(-t, self.f_ext)
         if self.contact is not None:
             self.contact.add_forces(u, r)
-        rarr = r.getArray().reshape(-1, 3)
-        r0 = u.getOwnershipRange()[0] // 3
+        rarr = r.getArray()
+        r0 = u.getOwnershipRange()[0]
         out = {}
         for i, bc in enumerate(self.scene.boundary):
             if bc.type == "pressure":
                 continue
-            v = mesh.surface_vertices(bc.surface)
-            v = v[mesh.owned[v]]
-            total = self.comm.allreduce(rarr[mesh.gvert[v] - r0].sum(axis=0), op=MPI.SUM)
+            # only the components this boundary holds: on an edge shared with another boundary the
+            # other components are that boundary's reaction
+            dofs = self.bc_per_boundary[i]
+            local = np.bincount(dofs % 3, weights=rarr[dofs - r0], minlength=3)
+            total = self.comm.allreduce(local, op=MPI.SUM)
             out[f"boundary[{i}] {bc.surface}"] = total.tolist()     # K u - f: the force it applies to the body
         r.destroy()
         fl.destroy()
@@ -213,6 +215,7 @@ class Run:
         }
 
     def destroy(self):
+        options.remove_options(self.from_scene)   # scene options live only while their run does
         self.system.destroy()
         if self.contact is not None:
             self.contact.destroy()

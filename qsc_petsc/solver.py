@@ -16,6 +16,7 @@ from .errors import ConvergenceError
 SNES_REASONS = {v: k for k, v in vars(PETSc.SNES.ConvergedReason).items() if not k.startswith("_")}
 KSP_REASONS = {v: k for k, v in vars(PETSc.KSP.ConvergedReason).items() if not k.startswith("_")}
 SUBSET = PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN
+PETSC_ERR_NOT_CONVERGED = 91   # raised instead of a reason under -qsc_ksp/snes_error_if_not_converged
 
 
 class ConstraintTerm:
@@ -202,9 +203,17 @@ class System:
             term.start = True
         u = u0.copy()
         u.getArray()[self.bc_local] = t * self.ubar.getArray()[self.bc_local]
-        self.snes.solve(None, u)
+        try:
+            self.snes.solve(None, u)
+        except PETSc.Error as exc:     # on every rank: the reason is collective; a failed solve like any other
+            if exc.ierr != PETSC_ERR_NOT_CONVERGED:
+                raise
+        # held dofs stay at their values up to the Krylov tolerance: put them back exactly
+        u.getArray()[self.bc_local] = t * self.ubar.getArray()[self.bc_local]
         reason = self.snes.getConvergedReason()
         ksp_reason = self.snes.getKSP().getConvergedReason()
+        if reason == 0 and ksp_reason < 0:      # stopped inside the linear solve, before SNES set its reason
+            reason = PETSc.SNES.ConvergedReason.DIVERGED_LINEAR_SOLVE
         stats = {
             "snes_iterations": self.snes.getIterationNumber(),
             "ksp_iterations": self.snes.getLinearSolveIterations(),

@@ -1,0 +1,361 @@
+"""The qsc command as a user meets it: one-line input errors on 1 and 2 ranks, versions, check, failed solves, options.
+
+Every case starts the real program in a subprocess (through mpirun for 2 ranks) with a time limit,
+so a rank left waiting in a collective call fails the test instead of hanging the suite. These
+tests start MPI jobs themselves and therefore run only in the serial suite.
+"""
+
+import json
+import os
+import re
+import shutil
+import signal
+import subprocess
+import sys
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import meshio
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+from qsc_petsc import fem
+from qsc_petsc.meshgen import box_mesh
+
+ROOT = Path(__file__).resolve().parents[1]
+CONFIGS = ROOT / "configs"
+_SCRIPT = Path(sys.executable).with_name("qsc")
+QSC = [str(_SCRIPT)] if _SCRIPT.exists() else [sys.executable, "-m", "qsc_petsc.cli"]
+MPIRUN = shutil.which("mpirun")
+ENV = {**os.environ, "OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1", "OMP_NUM_THREADS": "1"}
+TIMEOUT = 60.0          # s; a healthy case takes about one
+RANKS = [1, pytest.param(2, marks=[pytest.mark.mpi,
+                                   pytest.mark.skipif(MPIRUN is None, reason="mpirun not found")])]
+
+# A block on a clamped base (no rigid-body modes), 2 x 2 x 2 hexes: the smallest scene that solves.
+BLOCK = """\
+name = "block"
+
+[[bodies]]
+name = "blk"
+mesh = {{ {mesh} }}
+material = {{ youngs_modulus = {E} }}
+
+[[boundary]]
+surface = "blk.{fixed}"
+type = "displacement"
+ux = 0.0
+uy = 0.0
+uz = 0.0
+"""
+BOX = 'type = "box", size = [1.0, 1.0, 1.0], cells = [2, 2, 2]'
+PRESSED = '\n[[boundary]]\nsurface = "blk.zmax"\ntype = "pressure"\nvalue = 1.0\n'     # 1 Pa on the top face
+
+# Two blocks on a clamped base, the upper one pushed down by its top face across a gap of 0.03 m:
+# the gap stays open in load step 1 and closes in load step 2 (contact rows exist in both).
+GAP = """\
+name = "gap"
+
+[[bodies]]
+name = "lower"
+mesh = { type = "box", size = [1.0, 1.0, 0.5], cells = [2, 2, 1] }
+material = { youngs_modulus = 1000.0 }
+
+[[bodies]]
+name = "upper"
+mesh = { type = "box", origin = [0.0, 0.0, 0.53], size = [1.0, 1.0, 0.5], cells = [3, 3, 1] }
+material = { youngs_modulus = 1000.0 }
+
+[[boundary]]
+surface = "lower.zmin"
+type = "displacement"
+ux = 0.0
+uy = 0.0
+uz = 0.0
+
+[[boundary]]
+surface = "upper.zmax"
+type = "displacement"
+ux = 0.0
+uy = 0.0
+uz = -0.05
+
+[[contact]]
+slave = "upper.zmin"
+master = "lower.zmax"
+
+[load]
+steps = 2
+"""
+
+
+def block_scene(folder, *, mesh=BOX, E="1000.0", fixed="zmin", extra=""):
+    """Write the block scene (with parts replaced) to folder/block.toml and return its path."""
+    path = Path(folder) / "block.toml"
+    path.write_text(BLOCK.format(mesh=mesh, E=E, fixed=fixed) + extra)
+    return path
+
+
+def write_gmsh_box(path, groups, cells=(2, 2, 2)):
+    """A tet mesh of the unit cube in gmsh 2.2 format; groups maps a physical surface name to a box side."""
+    box = box_mesh((0.0, 0.0, 0.0), (1.0, 1.0, 1.0), cells, "tet")
+    blocks, tags, field_data = [("tetra", box.cells)], [np.full(len(box.cells), 100)], {"solid": np.array([100, 3])}
+    for tag, (name, side) in enumerate(groups.items(), start=1):
+        rows = box.surfaces[side]
+        blocks.append(("triangle", fem.cell_faces("tet", box.cells[rows[:, 0]], rows[:, 1])))
+        tags.append(np.full(len(rows), tag))
+        field_data[name] = np.array([tag, 2])
+    meshio.write(path, meshio.Mesh(box.points, blocks, cell_data={"gmsh:physical": tags, "gmsh:geometrical": tags},
+                                   field_data=field_data), file_format="gmsh22", binary=False)
+    return box
+
+
+def serial_only():
+    """Skip a test that starts MPI jobs when the suite itself runs under mpirun."""
+    if MPI.COMM_WORLD.size > 1:
+        pytest.skip("starts MPI jobs itself: serial suite only")
+
+
+def run_qsc(args, ranks=1, cwd=None, timeout=TIMEOUT):
+    """Run qsc on `ranks` processes; returns (exit code, stdout + stderr), exit code None after the time limit."""
+    cmd = QSC + [str(a) for a in args]
+    if ranks > 1:
+        cmd = [MPIRUN, "--oversubscribe", "-n", str(ranks)] + cmd
+    # a session of its own, so that a hang is ended together with every rank mpirun started
+    proc = subprocess.Popen(cmd, cwd=cwd, env=ENV, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            start_new_session=True)
+    try:
+        out, _ = proc.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        out, _ = proc.communicate()
+        return None, out
+    return proc.returncode, out
+
+
+def qsc(args, ranks=1, cwd=None, timeout=TIMEOUT):
+    """run_qsc, failing the test if the run is still going after the time limit."""
+    serial_only()
+    code, out = run_qsc(args, ranks, cwd, timeout)
+    if code is None:
+        pytest.fail(f"qsc {' '.join(map(str, args))} on {ranks} rank(s) still running after {timeout} s:\n{out}")
+    return code, out
+
+
+def own_lines(output):
+    """The program's non-empty output lines, without Open MPI's boxed notices (between lines of dashes)."""
+    lines, in_notice = [], False
+    for line in output.splitlines():
+        if set(line.strip()) == {"-"}:
+            in_notice = not in_notice
+        elif not in_notice and line.strip() and "ORTE_ERROR_LOG" not in line:
+            lines.append(line)
+    return lines
+
+
+# ---------------------------------------------------------------- bad input
+
+def _unknown_key(tmp):
+    return [block_scene(tmp, extra='\n[load]\nsteps = 1\nstepz = 2\n')], ["load.stepz", "unknown key"]
+
+
+def _wrong_type(tmp):
+    return [block_scene(tmp, E='"stiff"')], ["bodies[0].material.youngs_modulus", "expected a number", '"stiff"']
+
+
+def _negative_modulus(tmp):
+    return [block_scene(tmp, E="-1000.0")], ["bodies[0].material.youngs_modulus", "must be > 0", "-1000.0"]
+
+
+def _missing_mesh_file(tmp):
+    return [block_scene(tmp, mesh='type = "file", path = "nowhere.msh"')], ["bodies[0].mesh.path", "nowhere.msh",
+                                                                            "not found"]
+
+
+def _unknown_box_surface(tmp):
+    return [block_scene(tmp, fixed="bottom")], ["boundary[0].surface", '"bottom"', "xmin"]
+
+
+def _unknown_file_surface(tmp):
+    # only known once rank 0 has read the mesh: every rank must fail with it
+    write_gmsh_box(tmp / "cube.msh", {"base": "zmin", "lid": "zmax"})
+    return [block_scene(tmp, mesh='type = "file", path = "cube.msh"', fixed="bottom")], [
+        "boundary[0].surface", "blk.bottom", "base", "lid"]
+
+
+def _not_a_mesh(tmp):
+    (tmp / "bad.msh").write_text("this is not a mesh\n$MeshFormat\ngarbage\n")
+    return [block_scene(tmp, mesh='type = "file", path = "bad.msh"')], ["cannot read mesh file", "bad.msh"]
+
+
+def _unknown_set_path(tmp):
+    return [block_scene(tmp), "--set", "solver.max_cutback=2"], ["solver.max_cutback", "unknown key"]
+
+
+def _set_missing_entry(tmp):
+    return [block_scene(tmp), "--set", "bodies.3.name=x"], ["bodies[3]", "no such entry"]
+
+
+BAD_INPUT = [_unknown_key, _wrong_type, _negative_modulus, _missing_mesh_file, _unknown_box_surface,
+             _unknown_file_surface, _not_a_mesh, _unknown_set_path, _set_missing_entry]
+
+
+@pytest.fixture(scope="module")
+def bad_input_runs(tmp_path_factory):
+    """Every bad-input case on 1 and 2 ranks, run side by side (an mpirun error exit is mostly waiting)."""
+    serial_only()
+    jobs = {}
+    for case in BAD_INPUT:
+        for ranks in (1, 2) if MPIRUN else (1,):
+            folder = tmp_path_factory.mktemp(f"{case.__name__.strip('_')}_{ranks}")
+            args, expected = case(folder)
+            jobs[case, ranks] = (["run", *args, "--out", folder / "out"], ranks, folder, expected)
+    with ThreadPoolExecutor(max_workers=4) as pool:
+        runs = {key: pool.submit(run_qsc, args, ranks, folder, 30.0) for key, (args, ranks, folder, _) in jobs.items()}
+        return {key: (*run.result(), jobs[key][3]) for key, run in runs.items()}
+
+
+@pytest.mark.parametrize("ranks", RANKS)
+@pytest.mark.parametrize("case", BAD_INPUT, ids=lambda f: f.__name__.strip("_"))
+def test_bad_input_is_one_line_and_exit_2(bad_input_runs, case, ranks):
+    """A bad scene, mesh or override shall end the run on every rank within seconds, with exit code 2
+    and one line naming the problem."""
+    code, out, expected = bad_input_runs[case, ranks]
+    assert code is not None, "still running after 30 s:\n" + out
+    assert "Traceback" not in out and "internal error" not in out, out
+    lines = own_lines(out)
+    assert code == 2, out
+    assert len(lines) == 1, out
+    assert lines[0].startswith("qsc: error: "), out
+    for text in expected:
+        assert text in lines[0], (text, lines[0])
+
+
+def test_missing_scene_file(tmp_path):
+    """A scene path that does not exist shall be exit code 2 with one line naming the path."""
+    code, out = qsc(["check", tmp_path / "nothing.toml"])
+    assert code == 2 and own_lines(out) == [f"qsc: error: {tmp_path / 'nothing.toml'}: scene file not found"], out
+
+
+# ---------------------------------------------------------------- version and check
+
+def test_version():
+    """qsc --version shall print the qsc_petsc, PETSc, petsc4py and MPI versions, one per line."""
+    import petsc4py
+    from petsc4py import PETSc
+
+    import qsc_petsc
+    code, out = qsc(["--version"])
+    lines = own_lines(out)
+    assert code == 0, out
+    assert [line.split()[0] for line in lines] == ["qsc_petsc", "PETSc", "petsc4py", "MPI"], out
+    assert lines[0] == f"qsc_petsc {qsc_petsc.__version__}"
+    assert lines[1] == "PETSc " + ".".join(map(str, PETSc.Sys.getVersion()))
+    assert lines[2] == f"petsc4py {petsc4py.__version__}"
+    assert len(lines[3].split()) > 1
+
+
+@pytest.mark.parametrize("ranks", RANKS)
+def test_check_reports_mesh_partition_and_contact(tmp_path, ranks):
+    """qsc check shall print mesh and partition statistics and the contact pair, once, and write nothing."""
+    code, out = qsc(["check", CONFIGS / "patch_test.toml"], ranks, cwd=tmp_path)
+    lines = own_lines(out)
+    assert code == 0, out
+    assert lines[0] == "scene patch_test: valid"
+    assert "mesh: 130 hex cells, 267 vertices, 801 dofs" in lines          # 4x4x2 + 7x7x2 hexes
+    assert "bodies: lower (32 cells), upper (98 cells)" in lines
+    assert f"partition over {ranks} rank(s):" in lines
+    ranks_lines = [line for line in lines if line.strip().startswith("rank ")]
+    assert len(ranks_lines) == ranks
+    assert sum(int(line.split()[2]) for line in ranks_lines) == 130                  # "rank r: N cells, ..."
+    assert sum(int(line.split(",")[1].split()[0]) for line in ranks_lines) == 801   # "..., D owned dofs, ..."
+    assert any(line.strip().startswith("balance (max/mean owned dofs):") for line in lines)
+    contact = [line for line in lines if line.startswith("contact[0]:")]
+    assert len(contact) == 1 and "upper.zmin (slave) / lower.zmax (master), quasi_symmetric" in contact[0], out
+    assert len(lines) == len(set(lines)), "a line printed by more than one rank:\n" + out
+    assert not list(tmp_path.iterdir())
+
+
+# ---------------------------------------------------------------- failed solves
+
+def _summary(out_dir):
+    return json.loads((out_dir / "summary.json").read_text())
+
+
+@pytest.mark.parametrize("ranks", RANKS)
+def test_failed_load_step_exits_3_and_keeps_earlier_steps(tmp_path, ranks):
+    """A load step that does not converge shall exit 3 with a message naming the SNES reason and the step;
+    summary.json shall say "failed" and the results of the steps before it shall stay readable."""
+    scene = tmp_path / "gap.toml"
+    scene.write_text(GAP)
+    # Calibrate on a free run: step 2 (the gap closes) needs more Newton iterations than step 1.
+    code, out = qsc(["run", scene, "--out", tmp_path / "free"], ranks)
+    assert code == 0, out
+    steps = _summary(tmp_path / "free")["steps"]
+    newton = [max(s["snes_iterations"] for s in step["solves"]) for step in steps]
+    assert newton[1] > newton[0], newton
+    code, out = qsc(["run", scene, "--out", tmp_path / "out", "--set", "solver.max_cutbacks=1",
+                     "-qsc_snes_max_it", newton[0]], ranks)
+    lines = own_lines(out)
+    assert code == 3, out
+    assert "Traceback" not in out
+    assert lines[-1].startswith("qsc: solve failed: load step 2 "), out
+    assert "SNES DIVERGED_MAX_IT" in lines[-1], out
+    assert any(line.startswith("step 1/2: ") for line in lines), out
+    summary = _summary(tmp_path / "out")
+    assert summary["status"] == "failed"
+    assert summary["error"] in lines[-1]
+    assert [s["step"] for s in summary["steps"]] == [1]
+    assert not (tmp_path / "out" / "steps" / "step_0002.xdmf").exists()
+    step1 = meshio.read(tmp_path / "out" / "steps" / "step_0001.xdmf")
+    assert step1.point_data["displacement"].shape == (len(step1.points), 3)
+    assert np.abs(step1.point_data["displacement"]).max() == pytest.approx(summary["steps"][0]["max_abs_displacement"])
+    with meshio.xdmf.TimeSeriesReader(tmp_path / "out" / "solution.xdmf") as series:
+        series.read_points_cells()
+        assert series.num_steps == 1
+
+
+@pytest.mark.parametrize("ranks", RANKS)
+def test_linear_solver_error_is_a_failed_solve(tmp_path, ranks):
+    """With -ksp_error_if_not_converged a Krylov failure shall be a failed solve (exit 3, KSP reason named),
+    not an internal error."""
+    args = ["run", block_scene(tmp_path, extra=PRESSED), "--out", tmp_path / "out", "--set", "solver.max_cutbacks=0"]
+    code, out = qsc(args + ["-qsc_ksp_max_it", "1", "-qsc_ksp_error_if_not_converged"], ranks)
+    lines = own_lines(out)
+    assert "Traceback" not in out and "internal error" not in out, out
+    assert code == 3, out
+    assert lines[-1].startswith("qsc: solve failed: load step 1 "), out
+    # DIVERGED_ITS and DIVERGED_MAX_IT are two PETSc names of one KSP reason
+    assert re.search(r"SNES DIVERGED_LINEAR_SOLVE .*KSP (DIVERGED_ITS|DIVERGED_MAX_IT)$", lines[-1]), out
+    assert _summary(tmp_path / "out")["status"] == "failed"
+
+
+# ---------------------------------------------------------------- PETSc options
+
+def test_command_line_options_win_over_the_scene(tmp_path):
+    """PETSc options on the command line shall override the scene's [petsc] table, and
+    petsc_options.txt shall say where each option came from."""
+    petsc = '\n[petsc]\nksp_type = "cg"\nksp_rtol = 1e-9\npc = { type = "jacobi" }\n'
+    scene = block_scene(tmp_path, extra=PRESSED + petsc)
+    code, out = qsc(["run", scene, "--out", tmp_path / "out", "-qsc_ksp_type", "preonly", "-qsc_pc_type", "lu"])
+    assert code == 0, out
+    text = (tmp_path / "out" / "petsc_options.txt").read_text()
+    source = {}
+    for line in text.splitlines():
+        if not line.startswith("#"):
+            option, _, where = line.partition("#")
+            name, *value = option.split()
+            source[name] = (" ".join(value), where.strip())
+    assert source["-qsc_ksp_type"] == ("preonly", "command line"), text
+    assert source["-qsc_pc_type"] == ("lu", "command line"), text
+    assert source["-qsc_ksp_rtol"] == ("1e-09", "scene"), text
+    # options the program sets itself are not the user's command line
+    assert all(where != "command line" for name, (_, where) in source.items()
+               if name not in ("-qsc_ksp_type", "-qsc_pc_type")), text
+    summary = _summary(tmp_path / "out")
+    assert summary["status"] == "ok"
+    assert summary["petsc_options"]["qsc_ksp_type"] == "preonly"
+    # a direct solve: one Krylov "iteration" per Newton iteration
+    step = summary["steps"][0]
+    assert step["ksp_iterations"] == step["snes_iterations"] >= 1

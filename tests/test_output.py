@@ -1,0 +1,193 @@
+"""The output folder: XDMF/HDF5 fields per load step, summary.json, the resolved scene, and their rank independence.
+
+The patch test (two bodies, non-matching meshes, two load steps) runs once on 1 rank and once on
+2 ranks through the qsc command; the tests read what those runs wrote. The file-mesh body runs
+in-process. These tests start MPI jobs themselves and therefore run only in the serial suite.
+"""
+
+import json
+
+import h5py
+import meshio
+import numpy as np
+import pytest
+
+from conftest import CONFIGS, run_scene
+from qsc_petsc.scene import load_scene
+from test_cli import MPIRUN, qsc, write_gmsh_box
+
+PATCH = CONFIGS / "patch_test.toml"
+OVERRIDES = ["bodies.0.mesh.cells=[2,2,1]", "bodies.1.mesh.cells=[3,3,1]", "load.steps=2"]
+PRESSURE = 1.0          # Pa on upper.zmax, area 1 m^2 (configs/patch_test.toml)
+# A direct solve, so that comparing ranks measures the parallel assembly and output, not the Krylov tolerance.
+DIRECT = ["-qsc_ksp_type", "preonly", "-qsc_pc_type", "redundant", "-qsc_redundant_pc_type", "lu"]
+
+
+def _run_patch(folder, ranks):
+    args = ["run", PATCH, "--out", folder, *DIRECT]
+    for text in OVERRIDES:
+        args += ["--set", text]
+    code, out = qsc(args, ranks)
+    assert code == 0, out
+    return folder
+
+
+@pytest.fixture(scope="module")
+def serial(tmp_path_factory):
+    """Output folder of the patch test on 1 rank."""
+    return _run_patch(tmp_path_factory.mktemp("serial"), 1)
+
+
+@pytest.fixture(scope="module")
+def parallel(tmp_path_factory):
+    """Output folder of the patch test on 2 ranks."""
+    if MPIRUN is None:
+        pytest.skip("mpirun not found")
+    return _run_patch(tmp_path_factory.mktemp("parallel"), 2)
+
+
+def summary_of(folder):
+    return json.loads((folder / "summary.json").read_text())
+
+
+# ---------------------------------------------------------------- fields
+
+def test_step_file_has_the_fields(serial):
+    """steps/step_0001.xdmf shall read with meshio.read, with point data displacement and cell data
+    stress (6 components), von_mises, body and rank on every cell."""
+    mesh = meshio.read(serial / "steps" / "step_0001.xdmf")
+    summary = summary_of(serial)
+    n_points, n_cells = summary["mesh"]["vertices"], summary["mesh"]["cells"]
+    assert mesh.points.shape == (n_points, 3)
+    assert [block.type for block in mesh.cells] == ["hexahedron"] and len(mesh.cells[0].data) == n_cells
+    assert mesh.point_data["displacement"].shape == (n_points, 3)
+    assert np.abs(mesh.point_data["displacement"]).max() == pytest.approx(
+        summary["steps"][0]["max_abs_displacement"], rel=1e-12)
+    stress = mesh.cell_data["stress"][0]
+    assert stress.shape == (n_cells, 6)
+    shapes = {name: np.shape(mesh.cell_data[name][0]) for name in ("von_mises", "body", "rank")}
+    assert all(shape in ((n_cells,), (n_cells, 1)) for shape in shapes.values()), shapes
+    body = np.ravel(mesh.cell_data["body"][0])
+    assert np.array_equal(np.unique(body), [0, 1])
+    assert np.all(np.ravel(mesh.cell_data["rank"][0]) == 0)
+    # uniaxial pressure at half load: sigma_zz about -p/2, von Mises about p/2 (non-matching meshes: not exact)
+    assert np.median(stress[:, 2]) == pytest.approx(-0.5 * PRESSURE, rel=0.05)
+    assert np.median(np.ravel(mesh.cell_data["von_mises"][0])) == pytest.approx(0.5 * PRESSURE, rel=0.05)
+
+
+def test_time_series_has_one_entry_per_load_step(serial):
+    """solution.xdmf shall read with meshio's TimeSeriesReader: one entry per load step, at increasing times."""
+    with meshio.xdmf.TimeSeriesReader(serial / "solution.xdmf") as series:
+        points, cells = series.read_points_cells()
+        entries = [series.read_data(k) for k in range(series.num_steps)]
+    assert len(entries) == 2
+    times = [t for t, _, _ in entries]
+    assert times == [0.5, 1.0]
+    for k, (t, point_data, cell_data) in enumerate(entries, start=1):
+        step = meshio.read(serial / "steps" / f"step_{k:04d}.xdmf")      # the same data, one step per file
+        assert np.array_equal(points, step.points)
+        assert np.array_equal(point_data["displacement"], step.point_data["displacement"])
+        assert np.array_equal(cell_data["stress"][0], step.cell_data["stress"][0])
+        assert cell_data["stress"][0].shape == (len(cells[0].data), 6)
+    assert np.abs(entries[1][1]["displacement"]).max() > np.abs(entries[0][1]["displacement"]).max() > 0.0
+
+
+# ---------------------------------------------------------------- summary.json and the resolved scene
+
+def test_summary_contents(serial):
+    """summary.json shall hold the scene, ranks, dofs, per-step iterations and reasons, time per phase,
+    a reaction per Dirichlet boundary and the peak memory."""
+    summary = summary_of(serial)
+    scene = load_scene(PATCH, OVERRIDES)
+    assert summary["scene"] == "patch_test" and summary["status"] == "ok" and summary["ranks"] == 1
+    assert summary["mesh"]["dofs"] == 3 * summary["mesh"]["vertices"] == sum(summary["mesh"]["dofs_per_rank"])
+    assert [s["step"] for s in summary["steps"]] == [1, 2]
+    assert [s["load_factor"] for s in summary["steps"]] == [0.5, 1.0]
+    for step in summary["steps"]:
+        assert step["snes_iterations"] >= 1 and step["ksp_iterations"] >= 1
+        assert step["snes_reason"].startswith("CONVERGED") and step["ksp_reason"].startswith("CONVERGED")
+        assert step["solves"] and all("snes_reason" in s and "ksp_reason" in s for s in step["solves"])
+    assert {"mesh", "assembly", "solve", "output"} <= set(summary["time"])
+    assert all(isinstance(t, float) and t >= 0.0 for t in summary["time"].values())
+    memory = summary["peak_memory_mib"]
+    assert memory["max_rank"] > 0 and len(memory["per_rank"]) == 1
+    # reactions: one per displacement boundary (the pressure is a load, not a reaction)
+    dirichlet = [f"boundary[{i}] {bc.surface}" for i, bc in enumerate(scene.boundary) if bc.type != "pressure"]
+    for step in summary["steps"]:
+        reactions = step["reactions"]
+        assert sorted(reactions) == sorted(dirichlet)
+        assert all(len(force) == 3 for force in reactions.values())
+        # a roller holds one component only, and the supports carry the pressure load p A t
+        assert reactions["boundary[1] lower.xmin"][1:] == [0.0, 0.0]
+        total = np.sum(list(reactions.values()), axis=0)
+        assert total == pytest.approx([0.0, 0.0, PRESSURE * step["load_factor"]], abs=1e-8)
+
+
+def test_resolved_scene_loads_back_equal(serial):
+    """scene.resolved.toml shall load back to a scene equal to the one that ran."""
+    ran = load_scene(PATCH, OVERRIDES)
+    again = load_scene(serial / "scene.resolved.toml")
+    assert again.to_dict() == ran.to_dict()
+
+
+# ---------------------------------------------------------------- rank independence
+
+def test_two_ranks_write_the_same_results(serial, parallel):
+    """Results written on 2 ranks shall equal those written on 1 rank entry by entry (1e-10 relative),
+    except the rank field."""
+    assert summary_of(parallel)["ranks"] == 2
+    with h5py.File(serial / "solution.h5", "r") as one, h5py.File(parallel / "solution.h5", "r") as two:
+        assert np.array_equal(one["mesh/geometry"][()], two["mesh/geometry"][()])
+        assert np.array_equal(one["mesh/topology"][()], two["mesh/topology"][()])
+        assert sorted(one) == sorted(two) == ["mesh", "step_0001", "step_0002"]
+        for step in ("step_0001", "step_0002"):
+            assert sorted(one[step]) == sorted(two[step])
+            for name in one[step]:
+                a, b = one[step][name][()], two[step][name][()]
+                assert a.shape == b.shape, (step, name)
+                if name == "rank":
+                    assert set(np.unique(b)) == {0.0, 1.0}
+                    continue
+                scale = max(np.abs(a).max(), np.finfo(float).tiny)
+                assert np.abs(a - b).max() <= 1e-10 * scale, (step, name, np.abs(a - b).max(), scale)
+    s1, s2 = summary_of(serial), summary_of(parallel)
+    for a, b in zip(s1["steps"], s2["steps"]):
+        for key, force in a["reactions"].items():
+            assert b["reactions"][key] == pytest.approx(force, rel=1e-8, abs=1e-10)
+
+
+# ---------------------------------------------------------------- a body read from a mesh file
+
+def test_file_mesh_body(comm, mpi_tmp):
+    """A body meshed in a gmsh 2.2 file shall run with displacement conditions on its named physical groups,
+    and its resolved scene shall load back equal."""
+    if comm.rank == 0:
+        write_gmsh_box(mpi_tmp / "cube.msh", {"base": "zmin", "lid": "zmax", "side": "xmin"})
+    comm.Barrier()
+    scene = mpi_tmp / "file_body.toml"
+    if comm.rank == 0:
+        scene.write_text(
+            'name = "file_body"\n\n'
+            '[[bodies]]\nname = "cube"\nmesh = { type = "file", path = "cube.msh" }\n'
+            'material = { youngs_modulus = 1000.0, poissons_ratio = 0.3 }\n\n'
+            '[[boundary]]\nsurface = "cube.base"\ntype = "displacement"\nux = 0.0\nuy = 0.0\nuz = 0.0\n\n'
+            '[[boundary]]\nsurface = "cube.lid"\ntype = "displacement"\nuz = -0.01\n')
+    comm.Barrier()
+    out = mpi_tmp / "out"
+    run, summary = run_scene(scene, out, (), comm)
+    run.destroy()
+    assert summary["status"] == "ok"
+    assert summary["mesh"]["cell_type"] == "tet" and summary["mesh"]["cells"] == 6 * 8
+    reactions = summary["steps"][-1]["reactions"]
+    base, lid = reactions["boundary[0] cube.base"], reactions["boundary[1] cube.lid"]
+    assert lid[:2] == [0.0, 0.0] and lid[2] < 0.0                    # the lid holds uz only, pushing down
+    assert np.add(base, lid) == pytest.approx([0.0, 0.0, 0.0], abs=1e-9 * abs(lid[2]))
+    if comm.rank == 0:
+        result = meshio.read(out / "steps" / "step_0001.xdmf")
+        u, z = result.point_data["displacement"], result.points[:, 2]
+        # prescribed values hold to the Krylov tolerance (the Newton update of a held dof is a CG iterate)
+        assert np.allclose(u[z == 1.0, 2], -0.01, rtol=0, atol=1e-9 * 0.01)
+        assert np.allclose(u[z == 0.0], 0.0, rtol=0, atol=1e-9 * 0.01)
+        resolved = load_scene(out / "scene.resolved.toml")
+        assert resolved.to_dict() == load_scene(scene).to_dict()
+        assert resolved.bodies[0].mesh.path == str(mpi_tmp / "cube.msh")
