@@ -21,5 +21,8 @@ test: setup
 	$(MPIRUN) -n 2 $(VENV)/bin/python -m pytest -q -p no:cacheprovider tests/parallel
 	$(MPIRUN) -n 3 $(VENV)/bin/python -m pytest -q -p no:cacheprovider tests/parallel
 
+container-test:
+	scripts/container-test
+
 clean:
 	rm -rf results .pytest_cache
