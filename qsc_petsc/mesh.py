@@ -83,6 +83,14 @@ class LocalMesh:
             self._surface_vertices[name] = np.sort(np.asarray(pts, dtype=np.int64) - v0)
         return self._surface_vertices[name]
 
+    def local_vectors(self, vec):
+        """Ghosted local values (nv, 3) of a dof-space global Vec, by local vertex."""
+        local = self.dm.createLocalVec()
+        self.dm.globalToLocal(vec, local)
+        values = local.getArray().reshape(-1, 3).copy()
+        local.destroy()
+        return values
+
     def body_vertices(self, body):
         """Local vertex indices of a body."""
         return np.unique(self.cells[self.cell_body == body])

@@ -107,12 +107,7 @@ class Run:
 
     def local_displacement(self, u):
         """Ghosted local displacement array (nv, 3) from the global Vec."""
-        dm = self.mesh.dm
-        ul = dm.createLocalVec()
-        dm.globalToLocal(u, ul)
-        arr = ul.getArray().reshape(-1, 3).copy()
-        ul.destroy()
-        return arr
+        return self.mesh.local_vectors(u)
 
     def reactions(self, u, t):
         """Net force [N] that each displacement/symmetry boundary exerts on the body (its constrained components)."""

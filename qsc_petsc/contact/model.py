@@ -181,14 +181,6 @@ class ContactModel:
         from contextlib import nullcontext
         return self.phases(name) if self.phases else nullcontext()
 
-    def local_displacement(self, u):
-        dm = self.mesh.dm
-        ul = dm.createLocalVec()
-        dm.globalToLocal(u, ul)
-        arr = ul.getArray().reshape(-1, 3).copy()
-        ul.destroy()
-        return arr
-
     def _term(self, name, rows, eps_n, h, augmented):
         mesh = self.mesh
         G = assembly.triplet_matrix(mesh, rows.G_rows, rows.G_cols, rows.G_vals)
@@ -215,7 +207,7 @@ class ContactModel:
         for term in self.current:
             term.G.destroy()
         mesh = self.mesh
-        U = self.local_displacement(u)
+        U = self.mesh.local_vectors(u)
         X = mesh.coords
         self.t = t
         out = []
@@ -277,11 +269,7 @@ class ContactModel:
         terms = {t.name: t for t in self.current}
         for pd in self.pairs:
             term = terms[f"contact[{pd['index']}]"]
-            term.evaluate(u)
-            fc = u.duplicate()
-            fc.set(0.0)
-            term.add_force(fc)
-            F = fc.getArray().reshape(-1, 3)
+            F = _term_force(term, u)
             entry = {"rows": self.comm.allreduce(len(term.rows), op=MPI.SUM),
                      "active_rows": self.comm.allreduce(int(term.active.sum()), op=MPI.SUM),
                      "eps_n": pd["eps_n"], "h_eff": pd["h_eff"]}
@@ -311,14 +299,9 @@ class ContactModel:
             entry["mean_penetration_slave"], entry["mean_penetration_master"] = ms, mm
             entry["swap_indicator"] = abs(ms - mm) / max(abs(ms), abs(mm), 1e-300)
             summaries[f"contact[{pd['index']}] {pd['spec'].slave} / {pd['spec'].master}"] = entry
-            fc.destroy()
         for dd in self.dies:
             term = terms[f"die[{dd['index']}]"]
-            term.evaluate(u)
-            fc = u.duplicate()
-            fc.set(0.0)
-            term.add_force(fc)
-            F = fc.getArray().reshape(-1, 3)
+            F = _term_force(term, u)
             force = self.comm.allreduce(-F[_owned_rows(mesh, dd["nodes"])].sum(axis=0), op=MPI.SUM)
             spec = dd["spec"]
             n = np.asarray(spec.normal)
@@ -334,7 +317,6 @@ class ContactModel:
                 "max_penetration": self.comm.allreduce(float(h.max(initial=-np.inf)), op=MPI.MAX),
                 "contact_area": self.comm.allreduce(float(term.W.getArray()[term.rows][term.active].sum()),
                                                     op=MPI.SUM)}
-            fc.destroy()
         fields = {"contact_traction": traction, "contact_penetration": penetration, "contact_status": status}
         return fields, summaries
 
@@ -342,6 +324,17 @@ class ContactModel:
         for term in self.current:
             term.G.destroy()
         self.current = []
+
+
+def _term_force(term, u):
+    """This term's contact force G^T m at u, as owned (n, 3) rows."""
+    term.evaluate(u)
+    fc = u.duplicate()
+    fc.set(0.0)
+    term.add_force(fc)
+    F = fc.getArray().reshape(-1, 3).copy()
+    fc.destroy()
+    return F
 
 
 def contact_plan(mesh, scene):
