@@ -215,8 +215,16 @@ def distribute_mesh(scene, comm):
         root[v0:v1, 0] = np.arange(n_vertices)
 
     partitioner = dm.getPartitioner()
-    partitioner.setFromOptions()
-    sf = dm.distribute() if comm.size > 1 else None
+    partitioner.setOptionsPrefix("qsc_")      # -qsc_petscpartitioner_type simple|ptscotch|parmetis|...
+    try:
+        partitioner.setFromOptions()
+        sf = dm.distribute() if comm.size > 1 else None
+    except PETSc.Error as exc:
+        if exc.ierr not in (56, 86):          # not supported / unknown type: the same on every rank
+            raise
+        chosen = PETSc.Options().getString("qsc_petscpartitioner_type", "?")
+        raise SceneError(f"-qsc_petscpartitioner_type: {chosen!r} is not available in this PETSc "
+                         f"(try ptscotch or simple)") from None
     if sf is not None:
         q0, q1 = dm.getChart()
         leaf = _bcast_points(sf, root, q1 - q0)
