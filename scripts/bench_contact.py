@@ -7,6 +7,7 @@ Writes the table into docs/performance.md. Usage:
 """
 
 import argparse
+import shlex
 import sys
 
 from benchlib import ROOT, replace_section, run
@@ -77,7 +78,7 @@ def main():
                             f"{sum(x['snes_iterations'] for x in s['steps'])} | "
                             f"{sum(x['ksp_iterations'] for x in s['steps'])} | {s['peak_memory_mib']['total']:.0f} |")
                 print(rows[-1], flush=True)
-    body = (f"Command: `.venv/bin/python scripts/bench_contact.py {' '.join(sys.argv[1:])}` (two unit cubes, upper mesh 1.5x finer, "
+    body = (f"Command: `.venv/bin/python scripts/bench_contact.py {shlex.join(sys.argv[1:])}` (two unit cubes, upper mesh 1.5x finer, "
             "sticking rigid dies, top die down 1 % of the height in 2 load steps, alpha = 1e4, "
             f"PETSc options: `{args.petsc or '(defaults: CG + GAMG)'}`; "
             "`merged` = the same 1 x 1 x 2 stack meshed as one conforming body with about the same number of dofs). "

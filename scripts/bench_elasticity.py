@@ -5,6 +5,8 @@ Writes the table into docs/performance.md. Usage: .venv/bin/python scripts/bench
 """
 
 import argparse
+import shlex
+import sys
 
 from benchlib import ROOT, replace_section, run
 
@@ -31,11 +33,13 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--cells", type=int, nargs="+", default=[31, 45, 68], help="cells per direction")
     ap.add_argument("--ranks", type=int, nargs="+", default=[1, 2])
+    ap.add_argument("--petsc", default="", help='PETSc options for every run, e.g. "-qsc_petscpartitioner_type simple"')
+    ap.add_argument("--title", default="Elasticity (no contact)", help="docs/performance.md section")
     args = ap.parse_args()
     rows = []
     for n in args.cells:
         for r in args.ranks:
-            s, wall = run(SCENE.format(n=n), r)
+            s, wall = run(SCENE.format(n=n), r, args.petsc.split())
             t = s["time"]
             dofs = s["mesh"]["dofs"]
             step = s["steps"][-1]
@@ -44,12 +48,12 @@ def main():
                         f"{t['output']:.2f} | {wall:.2f} | {step['ksp_iterations']} | {mem['max_rank']:.0f} | "
                         f"{mem['total']:.0f} | {dofs / max(t['assembly'], 1e-9) / r / 1e6:.2f} |")
             print(rows[-1], flush=True)
-    body = ("Command: `.venv/bin/python scripts/bench_elasticity.py` (unit box, Q1 hexes, bottom clamped, "
-            "pressure on top, CG + GAMG, rtol 1e-10). Times in seconds, max over ranks; wall = the whole "
+    body = (f"Command: `.venv/bin/python scripts/bench_elasticity.py {shlex.join(sys.argv[1:])}` (unit box, Q1 hexes, bottom clamped, "
+            f"pressure on top, CG + GAMG, rtol 1e-10; PETSc options `{args.petsc or '(defaults)'}`). Times in seconds, max over ranks; wall = the whole "
             "`mpirun qsc run` including Python start-up; memory = peak resident set in MiB.\n\n"
             "| dofs | ranks | mesh | assembly | solve | output | wall | KSP its | mem/rank max | mem total | "
             "assembly Mdofs/s/rank |\n|---|---|---|---|---|---|---|---|---|---|---|\n" + "\n".join(rows) + "\n")
-    replace_section(ROOT / "docs" / "performance.md", "Elasticity (no contact)", body)
+    replace_section(ROOT / "docs" / "performance.md", args.title, body)
 
 
 if __name__ == "__main__":
