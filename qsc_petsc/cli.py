@@ -27,11 +27,12 @@ def build_parser():
 
 
 def versions():
-    from mpi4py import MPI
     import petsc4py
+    from mpi4py import MPI
     from petsc4py import PETSc
+
     from . import __version__
-    return (f"qsc_petsc {__version__}\nPETSc {'%d.%d.%d' % PETSc.Sys.getVersion()}\n"
+    return (f"qsc_petsc {__version__}\nPETSc {'.'.join(map(str, PETSc.Sys.getVersion()))}\n"
             f"petsc4py {petsc4py.__version__}\nMPI {MPI.Get_library_version().splitlines()[0].strip()} "
             f"(mpi4py {__import__('mpi4py').__version__})")
 
@@ -71,7 +72,7 @@ def main(argv=None):
     except QscError as exc:
         say(f"qsc: error: {exc}")
         return EXIT_INPUT
-    except Exception:                               # a bug: never leave other ranks waiting
+    except Exception:  # noqa: BLE001 - a bug: print it and abort, never leave other ranks waiting
         sys.stderr.write(f"[rank {comm.rank}] internal error:\n{traceback.format_exc()}")
         sys.stderr.flush()
         comm.Abort(EXIT_BUG)

@@ -78,7 +78,7 @@ class LocalMesh:
         if name not in self._surface_vertices:
             self.surface_index(name)
             label = self.dm.getLabel(name)
-            v0, v1 = self.dm.getDepthStratum(0)
+            v0 = self.dm.getDepthStratum(0)[0]
             pts = label.getStratumIS(1).getIndices() if label.getStratumSize(1) else np.zeros(0, int)
             self._surface_vertices[name] = np.sort(np.asarray(pts, dtype=np.int64) - v0)
         return self._surface_vertices[name]

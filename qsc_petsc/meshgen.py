@@ -167,7 +167,7 @@ def read_mesh_file(path, scale=1.0):
     try:
         with redirect_stdout(printed), redirect_stderr(printed):
             mesh = meshio.read(path)
-    except (Exception, SystemExit) as e:  # ReadError, OSError, ValueError, KeyError, ...
+    except (Exception, SystemExit) as e:  # noqa: BLE001 - meshio raises ReadError, OSError, ValueError, KeyError, ...
         if isinstance(e, SystemExit):  # its reason was printed, wrapped to the terminal width
             reason = " ".join(s.strip() for s in printed.getvalue().splitlines() if s.strip())
         else:

@@ -80,12 +80,12 @@ class ResultWriter:
         kind = TOPOLOGY[self.mesh.cell_type]
         lines = [f'<Grid Name="step_{step:04d}" GridType="Uniform">'] + ([f'<Time Value="{time!r}"/>'] if with_time else [])
         lines += [
-                 f'<Topology TopologyType="{kind}" NumberOfElements="{n_cells}">',
-                 f'<DataItem Dimensions="{n_cells} {k}" NumberType="Int" Precision="8" Format="HDF">'
-                 f'{h5path}:/mesh/topology</DataItem></Topology>',
-                 '<Geometry GeometryType="XYZ">',
-                 f'<DataItem Dimensions="{n_points} 3" NumberType="Float" Precision="8" Format="HDF">'
-                 f'{h5path}:/mesh/geometry</DataItem></Geometry>']
+            f'<Topology TopologyType="{kind}" NumberOfElements="{n_cells}">',
+            (f'<DataItem Dimensions="{n_cells} {k}" NumberType="Int" Precision="8" Format="HDF">'
+             f'{h5path}:/mesh/topology</DataItem></Topology>'),
+            '<Geometry GeometryType="XYZ">',
+            (f'<DataItem Dimensions="{n_points} 3" NumberType="Float" Precision="8" Format="HDF">'
+             f'{h5path}:/mesh/geometry</DataItem></Geometry>')]
         for center, name, shape in fields:
             width = shape[1] if len(shape) > 1 else 1
             dims = " ".join(str(s) for s in shape)

@@ -96,7 +96,7 @@ class Run:
         mesh = self.mesh
         return {
             "scene": self.scene.name, "status": "running", "qsc_petsc": __version__,
-            "petsc": "%d.%d.%d" % PETSc.Sys.getVersion(), "ranks": self.comm.size,
+            "petsc": ".".join(map(str, PETSc.Sys.getVersion())), "ranks": self.comm.size,
             "mesh": {"cell_type": mesh.cell_type, "cells": mesh.n_cells, "vertices": mesh.n_vertices,
                      "dofs": 3 * mesh.n_vertices, "constrained_dofs": self.n_constrained,
                      "bodies": mesh.body_names,

@@ -8,8 +8,9 @@ import operator
 import os
 import re
 import tomllib
+from collections.abc import Iterator, Sequence
 from pathlib import Path
-from typing import Any, Iterator, Sequence
+from typing import Any
 
 from .errors import SceneError
 
@@ -340,7 +341,7 @@ class Options(Field):
             raise self.wrong_type(value, path)
         out = dict(self.default)
         for name, (where, v) in _flatten_options(value, path).items():
-            if name.startswith("-") or name.startswith(OPTIONS_PREFIX):
+            if name.startswith(("-", OPTIONS_PREFIX)):
                 raise SceneError(f"{where}: write the option without a leading '-' or the {OPTIONS_PREFIX!r} prefix "
                                  f"(the program adds them)")
             if not re.fullmatch(r"[A-Za-z0-9_]+", name):

@@ -69,9 +69,8 @@ def main():
     for n in args.cells:
         for r in args.ranks:
             for f in args.formulations:
-                s, wall = run(scene(n, f), r, args.petsc.split())
+                s, _ = run(scene(n, f), r, args.petsc.split())
                 t = s["time"]
-                step = s["steps"][-1]
                 total = sum(t.values())
                 rows.append(f"| {s['mesh']['dofs']} | {r} | {f} | {t.get('search', 0):.2f} | {t.get('rows', 0):.2f} | "
                             f"{t['assembly']:.2f} | {t['solve']:.2f} | {total:.2f} | "

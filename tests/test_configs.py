@@ -6,8 +6,8 @@ Runs serially in the suite; collective (every rank calls run_scene), so it also 
 import tomllib
 
 import pytest
-
 from conftest import CONFIGS, run_scene
+
 from qsc_petsc.scene import load_scene
 
 SCENES = sorted(CONFIGS.glob("*.toml"))

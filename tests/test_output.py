@@ -11,10 +11,10 @@ import h5py
 import meshio
 import numpy as np
 import pytest
-
 from conftest import CONFIGS, run_scene
-from qsc_petsc.scene import load_scene
 from test_cli import MPIRUN, qsc, write_gmsh_box
+
+from qsc_petsc.scene import load_scene
 
 PATCH = CONFIGS / "patch_test.toml"
 OVERRIDES = ["bodies.0.mesh.cells=[2,2,1]", "bodies.1.mesh.cells=[3,3,1]", "load.steps=2"]

@@ -98,7 +98,7 @@ def test_scene_is_read_only_and_names_missing_attributes():
     with pytest.raises(AttributeError):
         scene.bodies[0].material.youngs_modulus = 1
     with pytest.raises(AttributeError, match=r"^bodies\[0\]\.material\.yongs: no such key$"):
-        scene.bodies[0].material.yongs
+        scene.bodies[0].material.yongs  # noqa: B018 - the access itself must raise
     scene.petsc["ksp_type"] = "gmres"  # a copy
     assert scene.petsc["ksp_type"] == "cg"
 
@@ -198,8 +198,8 @@ CASES = [
     (_set(["boundary", 0, "surface"], "middle.zmin"),
      'boundary[0].surface: no body named "middle" (bodies: bottom, top)'),
     (_set(["boundary", 0, "surface"], "bottom.top"),
-     'boundary[0].surface: box body "bottom" has no surface "top" '
-     '(expected one of: xmin, xmax, ymin, ymax, zmin, zmax)'),
+     ('boundary[0].surface: box body "bottom" has no surface "top" '
+      '(expected one of: xmin, xmax, ymin, ymax, zmin, zmax)')),
     (_set(["contact", 0, "master"], "top.zmin"), 'contact[0].master: same surface as slave ("top.zmin")'),
     (_set(["contact", 0, "master"], "top.xmax"),
      'contact[0].master: self-contact is not supported (slave and master are both on body "top")'),

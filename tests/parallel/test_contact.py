@@ -5,9 +5,9 @@ ranks, and on 3 ranks some rank owns no contact surface); assertions use all-red
 
 import numpy as np
 import pytest
+from conftest import CONFIGS, all_close, run_scene
 from mpi4py import MPI
 
-from conftest import CONFIGS, all_close, run_scene
 from qsc_petsc.errors import SceneError
 
 FORMULATIONS = ["master_slave", "two_pass", "quasi_symmetric"]
@@ -15,7 +15,7 @@ FORMULATIONS = ["master_slave", "two_pass", "quasi_symmetric"]
 
 def stress_zz_error(run, p=1.0):
     """max over cells of |sigma_zz + p| / p, all ranks."""
-    point, cell, _ = run.fields(run.u)
+    _, cell, _ = run.fields(run.u)
     err = np.abs(cell["stress"][:, 2] + p).max(initial=0.0) / p
     return run.comm.allreduce(err, op=MPI.MAX)
 
@@ -63,7 +63,7 @@ def test_block_between_rigid_dies_is_uniaxial(comm, mpi_tmp):
     summary = run.execute()
     assert summary["status"] == "ok"
     # the two dies' penalty compliance shortens the effective stroke: compare with the measured strain
-    point, cell, ul = run.fields(run.u)
+    _, cell, _ = run.fields(run.u)
     s = cell["stress"]
     szz = comm.allreduce(float(s[:, 2].mean()) if len(s) else 0.0, op=MPI.SUM) / comm.size
     dev = comm.allreduce(float(np.abs(s[:, [0, 1, 3, 4, 5]]).max(initial=0.0)), op=MPI.MAX)
@@ -131,10 +131,11 @@ def test_augmented_lagrangian_removes_the_penalty_error(comm, mpi_tmp):
 
 def test_failed_increment_is_cut_and_reported(comm, mpi_tmp):
     """A load step whose Newton cannot converge is halved max_cutbacks times, then a ConvergenceError names it."""
+    from petsc4py import PETSc
+
     from qsc_petsc.errors import ConvergenceError
     from qsc_petsc.run import Run
     from qsc_petsc.scene import load_scene
-    from petsc4py import PETSc
     opts = PETSc.Options()
     opts.setValue("qsc_snes_max_it", 1)          # one Newton step cannot settle the active set from a gap
     try:
@@ -153,6 +154,7 @@ def test_rank_without_contact_surface(comm, mpi_tmp):
     """With a bystander body partitioned in cell order, the last rank owns no contact surface, yet the
     contact results equal the serial ones (the other ranks split the interface between them)."""
     from petsc4py import PETSc
+
     from qsc_petsc.run import Run
     from qsc_petsc.scene import load_scene, parse_scene
     data = load_scene(CONFIGS / "patch_test.toml", ["contact.0.formulation=quasi_symmetric"]).to_dict()

@@ -4,9 +4,8 @@ Runs serially in the suite and again under mpirun -n 2 and -n 3; assertions use 
 
 import numpy as np
 import pytest
-from mpi4py import MPI
-
 from conftest import CONFIGS, all_close, run_scene
+from mpi4py import MPI
 
 E, NU, STRAIN = 1000.0, 0.3, 0.01
 
@@ -58,8 +57,8 @@ def test_simple_shear_is_exact(comm, mpi_tmp):
 def test_rank_count_invariance(comm, mpi_tmp):
     """All-reduced results on N ranks equal the serial ones to 1e-10, with a body living on one rank only."""
     sets = ["bodies.0.mesh.cells=[4,3,5]", "load.steps=1"]
-    from qsc_petsc.scene import load_scene, parse_scene
     from qsc_petsc.run import Run
+    from qsc_petsc.scene import load_scene, parse_scene
     data = load_scene(CONFIGS / "block_compression.toml", sets).to_dict()
     small = {"name": "pebble", "mesh": {"type": "box", "origin": [3.0, 0.0, 0.0], "size": [0.5, 0.5, 0.5],
                                         "cells": [1, 1, 1]},
