@@ -18,7 +18,7 @@ from mpi4py import MPI
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "scripts"))
-from benchlib import replace_section  # noqa: E402
+from benchlib import replace_section
 
 PAIRS = [(4, 5), (4, 7), (2, 8), (8, 2), (3, 10), (4, 4)]
 FORMULATIONS = [("master_slave", None), ("two_pass", None), ("quasi_symmetric", 0.5), ("quasi_symmetric", "finer")]
@@ -40,7 +40,7 @@ def solve(lower, upper, formulation, weight, slave, alpha):
     scene = load_scene(ROOT / "configs" / "patch_test.toml", sets)
     run = Run(scene, MPI.COMM_SELF, ROOT / "results" / "patch_table", log=lambda *a: None)
     summary = run.execute()
-    point, cell, ul = run.fields(run.u)
+    _, cell, ul = run.fields(run.u)
     contact_fields, _ = run.contact.report(run.u, ul)
     szz = cell["stress"][:, 2]
     err = np.abs(szz + 1.0)                       # p = 1
@@ -81,9 +81,10 @@ def main():
         w = csv.DictWriter(f, fieldnames=COLUMNS)
         w.writeheader()
         w.writerows(rows)
-    fmt = lambda x: f"{x:.2e}" if isinstance(x, float) else str(x)  # noqa: E731
-    table = ["| lower | upper | formulation | weight | slave | alpha | max \\|szz+p\\|/p | rms | max traction err "
-             "| max pen slave | max pen master | Newton | swap diff |", "|" + "---|" * len(COLUMNS)]
+    fmt = lambda x: f"{x:.2e}" if isinstance(x, float) else str(x)
+    header = ("| lower | upper | formulation | weight | slave | alpha | max \\|szz+p\\|/p | rms | max traction err "
+              "| max pen slave | max pen master | Newton | swap diff |")
+    table = [header, "|" + "---|" * len(COLUMNS)]
     table += ["| " + " | ".join(fmt(r[c]) for c in COLUMNS) + " |" for r in rows]
     body = (f"Command: `.venv/bin/python scripts/patch_table.py {' '.join(sys.argv[1:])}` (serial, MUMPS; "
             "CSV: docs/patch_table.csv). Stress errors over cells, traction error over the nodes of both "

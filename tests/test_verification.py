@@ -4,11 +4,10 @@ import sys
 
 import numpy as np
 import pytest
-
 from conftest import ROOT
 
 sys.path.insert(0, str(ROOT / "scripts"))
-from patch_table import SIDES, solve  # noqa: E402
+from patch_table import SIDES, solve
 
 NON_MATCHING = [(4, 5), (4, 7), (2, 8), (8, 2), (3, 10)]
 
