@@ -188,19 +188,12 @@ class ContactModel:
         W = assembly.row_vector(mesh, rows.W_rows, rows.W_vals, self.template)
         r0 = self.template.getOwnershipRange()[0]
         w = W.getArray()
-        closed = self.scene.solver.active_set_tolerance * w * h
+        exists = w > 0                     # the term works on the rows that exist
+        closed = self.scene.solver.active_set_tolerance * w[exists] * h
         gate = None
         if len(rows.gate_rows):
-            ids = np.arange(len(w)) + r0
-            gate = gate_positions(ids, rows.gate_rows, rows.gate_of)
-        term = ConstraintTerm(name, G, g, W, rows.phi, eps_n, closed[w > 0], gate, augmented)
-        if gate is not None:
-            # gate positions refer to the full local row array; the term works on existing rows only
-            pos = np.full(len(w), -1)
-            pos[term.rows] = np.arange(len(term.rows))
-            g_of = gate[term.rows]
-            term.gate_of = np.where(g_of >= 0, pos[np.maximum(g_of, 0)], -1)
-        return term
+            gate = gate_positions(np.flatnonzero(exists) + r0, rows.gate_rows, rows.gate_of)
+        return ConstraintTerm(name, G, g, W, rows.phi, eps_n, closed, gate, augmented)
 
     def terms(self, u, t):
         """New search at the current displacement u, load factor t: one ConstraintTerm per pair and die."""
