@@ -7,10 +7,8 @@ Writes the table into docs/performance.md. Usage:
 """
 
 import argparse
-import shlex
-import sys
 
-from benchlib import ROOT, replace_section, run
+from benchlib import ROOT, add_docs_args, run, write_table
 
 BODY = """
 [[bodies]]
@@ -62,8 +60,7 @@ def main():
     ap.add_argument("--cells", type=int, nargs="+", default=[17, 25, 39])
     ap.add_argument("--ranks", type=int, nargs="+", default=[2])
     ap.add_argument("--formulations", nargs="+", default=["merged", "master_slave", "two_pass", "quasi_symmetric"])
-    ap.add_argument("--petsc", default="", help='PETSc options for every run, e.g. "-qsc_ksp_type preonly -qsc_pc_type lu"')
-    ap.add_argument("--title", default="Contact: two cubes between rigid dies", help="docs/performance.md section")
+    add_docs_args(ap, "Contact: two cubes between rigid dies")
     args = ap.parse_args()
     rows = []
     for n in args.cells:
@@ -77,15 +74,14 @@ def main():
                             f"{sum(x['snes_iterations'] for x in s['steps'])} | "
                             f"{sum(x['ksp_iterations'] for x in s['steps'])} | {s['peak_memory_mib']['total']:.0f} |")
                 print(rows[-1], flush=True)
-    body = (f"Command: `.venv/bin/python scripts/bench_contact.py {shlex.join(sys.argv[1:])}` (two unit cubes, upper mesh 1.5x finer, "
-            "sticking rigid dies, top die down 1 % of the height in 2 load steps, alpha = 1e4, "
-            f"PETSc options: `{args.petsc or '(defaults: CG + GAMG)'}`; "
-            "`merged` = the same 1 x 1 x 2 stack meshed as one conforming body with about the same number of dofs). "
-            "Seconds, max over ranks; solve includes the residual/Jacobian contact products; "
-            "memory = peak resident set over all ranks, MiB.\n\n"
-            "| dofs | ranks | formulation | search | rows | assembly | solve | total | Newton its | KSP its | mem total |\n"
-            "|---|---|---|---|---|---|---|---|---|---|---|\n" + "\n".join(rows) + "\n")
-    replace_section(ROOT / "docs" / "performance.md", args.title, body)
+    description = ("two unit cubes, upper mesh 1.5x finer, sticking rigid dies, top die down 1 % of the height in "
+                   f"2 load steps, alpha = 1e4, PETSc options: `{args.petsc or '(defaults: CG + GAMG)'}`; `merged` = "
+                   "the same 1 x 1 x 2 stack meshed as one conforming body with about the same number of dofs. "
+                   "Seconds, max over ranks; solve includes the residual/Jacobian contact products; "
+                   "memory = peak resident set over all ranks, MiB")
+    write_table(ROOT / "docs" / "performance.md", args.title, "bench_contact.py", description,
+                ["dofs", "ranks", "formulation", "search", "rows", "assembly", "solve", "total", "Newton its",
+                 "KSP its", "mem total"], rows)
 
 
 if __name__ == "__main__":

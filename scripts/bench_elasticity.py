@@ -5,10 +5,8 @@ Writes the table into docs/performance.md. Usage: .venv/bin/python scripts/bench
 """
 
 import argparse
-import shlex
-import sys
 
-from benchlib import ROOT, replace_section, run
+from benchlib import ROOT, add_docs_args, run, write_table
 
 SCENE = """
 name = "bench_box"
@@ -33,8 +31,7 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--cells", type=int, nargs="+", default=[31, 45, 68], help="cells per direction")
     ap.add_argument("--ranks", type=int, nargs="+", default=[1, 2])
-    ap.add_argument("--petsc", default="", help='PETSc options for every run, e.g. "-qsc_petscpartitioner_type simple"')
-    ap.add_argument("--title", default="Elasticity (no contact)", help="docs/performance.md section")
+    add_docs_args(ap, "Elasticity (no contact)")
     args = ap.parse_args()
     rows = []
     for n in args.cells:
@@ -48,12 +45,12 @@ def main():
                         f"{t['output']:.2f} | {wall:.2f} | {step['ksp_iterations']} | {mem['max_rank']:.0f} | "
                         f"{mem['total']:.0f} | {dofs / max(t['assembly'], 1e-9) / r / 1e6:.2f} |")
             print(rows[-1], flush=True)
-    body = (f"Command: `.venv/bin/python scripts/bench_elasticity.py {shlex.join(sys.argv[1:])}` (unit box, Q1 hexes, bottom clamped, "
-            f"pressure on top, CG + GAMG, rtol 1e-10; PETSc options `{args.petsc or '(defaults)'}`). Times in seconds, max over ranks; wall = the whole "
-            "`mpirun qsc run` including Python start-up; memory = peak resident set in MiB.\n\n"
-            "| dofs | ranks | mesh | assembly | solve | output | wall | KSP its | mem/rank max | mem total | "
-            "assembly Mdofs/s/rank |\n|---|---|---|---|---|---|---|---|---|---|---|\n" + "\n".join(rows) + "\n")
-    replace_section(ROOT / "docs" / "performance.md", args.title, body)
+    description = ("unit box, Q1 hexes, bottom clamped, pressure on top, CG + GAMG, rtol 1e-10; PETSc options "
+                   f"`{args.petsc or '(defaults)'}`. Times in seconds, max over ranks; wall = the whole "
+                   "`mpirun qsc run` including Python start-up; memory = peak resident set in MiB")
+    write_table(ROOT / "docs" / "performance.md", args.title, "bench_elasticity.py", description,
+                ["dofs", "ranks", "mesh", "assembly", "solve", "output", "wall", "KSP its", "mem/rank max",
+                 "mem total", "assembly Mdofs/s/rank"], rows)
 
 
 if __name__ == "__main__":

@@ -2,6 +2,7 @@
 
 import json
 import os
+import shlex
 import subprocess
 import sys
 import tempfile
@@ -39,5 +40,20 @@ def replace_section(path, title, body):
         text = text.rstrip("\n") + "\n\n" + head + body
     else:
         end = text.find("\n## ", start + len(head))
-        text = text[:start] + head + body + (text[end + 1:] if end >= 0 else "")
+        text = text[:start] + head + body.rstrip("\n") + "\n\n" + (text[end + 1:] if end >= 0 else "")
     path.write_text(text.rstrip("\n") + "\n")
+
+
+def add_docs_args(parser, title, petsc=True):
+    """The options every docs-writing script shares: extra PETSc options and the section to (re)write."""
+    if petsc:
+        parser.add_argument("--petsc", default="", help='PETSc options for every run, e.g. "-qsc_pc_type lu"')
+    parser.add_argument("--title", default=title, help="the docs section to (re)write")
+
+
+def write_table(path, title, script, description, columns, rows):
+    """(Re)write a docs section: the command that made it (this process's arguments), what it measures,
+    and a Markdown table with the given column names and pre-formatted '| ... |' rows."""
+    command = " ".join([".venv/bin/python", f"scripts/{script}", shlex.join(sys.argv[1:])]).rstrip()
+    table = ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns), *rows]
+    replace_section(path, title, f"Command: `{command}` ({description})\n\n" + "\n".join(table) + "\n")

@@ -18,7 +18,7 @@ from mpi4py import MPI
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "scripts"))
-from benchlib import replace_section
+from benchlib import add_docs_args, write_table
 
 PAIRS = [(4, 5), (4, 7), (2, 8), (8, 2), (3, 10), (4, 4)]
 FORMULATIONS = [("master_slave", None), ("two_pass", None), ("quasi_symmetric", 0.5), ("quasi_symmetric", "finer")]
@@ -60,6 +60,7 @@ def solve(lower, upper, formulation, weight, slave, alpha):
 def main():
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--alphas", nargs="+", default=["1e2", "1e4", "1e6"])
+    add_docs_args(ap, "Contact patch test table", petsc=False)
     args = ap.parse_args()
     rows = []
     for lower, upper in PAIRS:
@@ -82,15 +83,13 @@ def main():
         w.writeheader()
         w.writerows(rows)
     fmt = lambda x: f"{x:.2e}" if isinstance(x, float) else str(x)
-    header = ("| lower | upper | formulation | weight | slave | alpha | max \\|szz+p\\|/p | rms | max traction err "
-              "| max pen slave | max pen master | Newton | swap diff |")
-    table = [header, "|" + "---|" * len(COLUMNS)]
-    table += ["| " + " | ".join(fmt(r[c]) for c in COLUMNS) + " |" for r in rows]
-    body = (f"Command: `.venv/bin/python scripts/patch_table.py {' '.join(sys.argv[1:])}` (serial, MUMPS; "
-            "CSV: docs/patch_table.csv). Stress errors over cells, traction error over the nodes of both "
-            "contact surfaces (force-based nodal traction), penetrations in m, swap diff = "
-            "||u(upper slave) - u(lower slave)|| / ||u(upper slave)|| (same on both rows).\n\n" + "\n".join(table) + "\n")
-    replace_section(docs / "verification.md", "Contact patch test table", body)
+    headers = ["lower", "upper", "formulation", "weight", "slave", "alpha", "max \\|szz+p\\|/p", "rms",
+               "max traction err", "max pen slave", "max pen master", "Newton", "swap diff"]
+    description = ("serial, MUMPS; CSV: docs/patch_table.csv. Stress errors over cells, traction error over the "
+                   "nodes of both contact surfaces (force-based nodal traction), penetrations in m, swap diff = "
+                   "||u(upper slave) - u(lower slave)|| / ||u(upper slave)|| (same on both rows)")
+    write_table(docs / "verification.md", args.title, "patch_table.py", description, headers,
+                ["| " + " | ".join(fmt(r[c]) for c in COLUMNS) + " |" for r in rows])
 
 
 if __name__ == "__main__":
