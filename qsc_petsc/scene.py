@@ -252,6 +252,25 @@ class ListOf(Field):
         return self.item.children(path + "[]")
 
 
+class WeightRule(Float):
+    """Quasi-symmetric weight: a constant w_a in [0, 1], "finer", or a table {power = p} (p > 0)."""
+
+    kind = 'float, "finer" or {power = p}'
+
+    def _also(self):
+        return super()._also() + " or {power = p}"
+
+    def check(self, value, path):
+        if isinstance(value, dict):
+            if set(value) != {"power"}:
+                raise SceneError(f"{path}: a weight table takes exactly one key, power, got {_show(value)}")
+            return {"power": Float(gt=0).check(value["power"], _join(path, "power"))}
+        return super().check(value, path)
+
+    def type_text(self):
+        return self.kind
+
+
 def Vec3(item: Field, doc="", **kw) -> ListOf:
     return ListOf(item, doc, length=3, **kw)
 
@@ -394,8 +413,15 @@ CONTACT = Table({
     "master": SurfaceRef("Master surface, on another body than the slave."),
     "formulation": Choice(("master_slave", "two_pass", "quasi_symmetric"), "How the constraint rows are built.",
                           default="quasi_symmetric"),
-    "weight": Float("Slave-side weight w_a of quasi_symmetric; \"finer\" weights toward the finer surface.",
-                    ge=0, le=1, also=("finer",), default=0.5),
+    "weight": WeightRule("Slave-side weight w_a of quasi_symmetric (0.5: the paper); {power = p}: "
+                         "w_a = h_b^p / (h_a^p + h_b^p) from the local face sizes, weighting the finer side; "
+                         "\"finer\" is p = 4.", ge=0, le=1, also=("finer",), default=0.5),
+    "integration": Choice(("nodal", "gauss", "segment"),
+                          "Quadrature of the contact integrals: surface nodes (node-to-segment, the paper), "
+                          "gauss_points^2 Gauss points per face, or exact segment integration over the overlaps "
+                          "of the two surfaces' faces.", default="nodal"),
+    "gauss_points": Int("Gauss points per direction on each face with integration = \"gauss\" (a triangle "
+                        "gets the collapsed n x n rule).", ge=1, le=10, default=3),
     "penalty": Float("Dimensionless alpha of the penalty eps_n = alpha * E_eff / h_eff.", gt=0, default=1e4),
     "enforcement": Choice(("penalty", "augmented_lagrangian"), "How the constraint is enforced.", default="penalty"),
     "augmented_tolerance": Float("Relative change of the multipliers that ends the augmented Lagrangian loop.",

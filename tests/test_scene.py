@@ -4,6 +4,7 @@ import copy
 import pickle
 import subprocess
 import sys
+import tomllib
 from pathlib import Path
 
 import pytest
@@ -167,8 +168,13 @@ CASES = [
     (_set(["bodies", 0], "a"), 'bodies[0]: expected a table, got "a"'),
     (_set(["contact", 0, "formulation"], "mortar"),
      'contact[0].formulation: must be one of "master_slave", "two_pass", "quasi_symmetric", got "mortar"'),
-    (_set(["contact", 0, "weight"], 1.5), 'contact[0].weight: must be >= 0 and <= 1 or "finer", got 1.5'),
-    (_set(["contact", 0, "weight"], "coarser"), 'contact[0].weight: expected a number or "finer", got "coarser"'),
+    (_set(["contact", 0, "weight"], 1.5), 'contact[0].weight: must be >= 0 and <= 1 or "finer" or {power = p}, got 1.5'),
+    (_set(["contact", 0, "weight"], "coarser"),
+     'contact[0].weight: expected a number or "finer" or {power = p}, got "coarser"'),
+    (_set(["contact", 0, "weight"], {"power": -2}), "contact[0].weight.power: must be > 0, got -2"),
+    (_set(["contact", 0, "weight"], {"power": 2, "base": 1}), "contact[0].weight: a weight table takes exactly one"),
+    (_set(["contact", 0, "integration"], "mortar"), 'contact[0].integration: must be one of "nodal", "gauss"'),
+    (_set(["contact", 0, "gauss_points"], 0), "contact[0].gauss_points: must be >= 1"),
     (_set(["contact", 0, "penalty"], 0), "contact[0].penalty: must be > 0, got 0"),
     (_set(["contact", 0, "enforcement"], "lagrange"), "contact[0].enforcement: must be one of "),
     (_set(["contact", 0, "augmented_max_iterations"], 0), "contact[0].augmented_max_iterations: must be >= 1, got 0"),
@@ -437,3 +443,13 @@ def test_module_prints_schema_markdown():
     out = subprocess.run([sys.executable, "-m", "qsc_petsc.scene"], cwd=ROOT, capture_output=True, text=True,
                          check=True).stdout
     assert out == schema_markdown()
+
+
+def test_weight_power_table_round_trips():
+    """A {power = p} weight shall parse from --set, survive the resolved TOML, and reach the row builder as a dict."""
+    scene = parse(two_cubes(), ["contact.0.weight={power=3}", "contact.0.integration=gauss",
+                                "contact.0.gauss_points=4"])
+    assert scene.contact[0].weight.to_dict() == {"power": 3.0}
+    assert scene.contact[0].integration == "gauss" and scene.contact[0].gauss_points == 4
+    again = parse(tomllib.loads(scene.to_toml()))
+    assert again.contact[0].weight.to_dict() == {"power": 3.0}

@@ -17,6 +17,7 @@ from petsc4py import PETSc
 from .. import assembly, fem
 from ..errors import SceneError
 from ..solver import ConstraintTerm
+from . import quadrature
 from . import rows as row_builders
 from .penalty import gate_positions
 from .search import closest_faces
@@ -114,27 +115,53 @@ def exchange_faces(mesh, faces, X, U, sizes, need_lo, need_hi):
     return gv, orig, fx, fu, allp[:, -1]
 
 
+def _need_box(pts, radius):
+    return (pts.min(axis=0) - radius, pts.max(axis=0) + radius) if len(pts) else (None, None)
+
+
+def _target_faces(mesh, T, X, U, points, radius):
+    """T's faces (local and received) that may meet points (p, 3) within radius: global ids, keys, X, U, sizes."""
+    tsize = fem.face_size(mesh.coords[T.faces]) if len(T.faces) else np.zeros(0)
+    gv, orig, fx, fu, fsize = exchange_faces(mesh, T.faces, X, U, tsize, *_need_box(points, radius))
+    return gv, np.sort(orig, axis=1), fx, fu, fsize
+
+
+def _search_pass(mesh, T, X, U, radius, points):
+    """Points (a quadrature.gauss_points-like dict) projected on T's faces: a rows.Pass, the found mask and dict."""
+    gv, key, fx, fu, fsize = _target_faces(mesh, T, X, U, points["x_cur"], radius)
+    found = closest_faces(points["x_cur"], fx + fu, mesh.face_type, key, radius)
+    return quadrature.found_pass(points, found, gv, fx, fsize), found["face"] >= 0, found
+
+
 def project_pass(mesh, S, T, X, U, radius):
     """Owned nodes of S projected on faces of T (local and gathered): a rows.Pass, the found mask, the search."""
-    pts = X[S.nodes] + U[S.nodes]
-    if len(pts):
-        lo, hi = pts.min(axis=0) - radius, pts.max(axis=0) + radius
-    else:
-        lo = hi = None
-    tsize = fem.face_size(mesh.coords[T.faces]) if len(T.faces) else np.zeros(0)
-    gv, orig, fx, fu, fsize = exchange_faces(mesh, T.faces, X, U, tsize, lo, hi)
-    found = closest_faces(pts, fx + fu, mesh.face_type, np.sort(orig, axis=1), radius)
-    ok = found["face"] >= 0
-    f = found["face"][ok]
-    # the search ran on the current configuration; the rows are linear in the total displacement,
-    # so the gap at u = 0 is measured between the reference positions of the same material points
-    N = found["shape"][ok]
-    x_target = np.einsum("pv,pvi->pi", N, fx[f])
-    delta0 = np.einsum("pi,pi->p", X[S.nodes[ok]] - x_target, found["normal"][ok])
-    pss = row_builders.Pass(node=mesh.gvert[S.nodes[ok]], area=S.area[ok], size=S.size[ok],
-                            target_nodes=gv[f], shape=N, normal=found["normal"][ok], delta0=delta0,
-                            target_size=fsize[f])
-    return pss, ok, found
+    v = S.nodes
+    points = {"x_cur": X[v] + U[v], "x_ref": X[v], "node": mesh.gvert[v], "weight": S.area, "size": S.size}
+    return _search_pass(mesh, T, X, U, radius, points)
+
+
+def gauss_pass(mesh, S, T, X, U, radius, n):
+    """n x n Gauss points of this rank's S faces projected on faces of T: a rows.Pass."""
+    f = S.faces
+    points = quadrature.gauss_points(mesh.face_type, X[f], X[f] + U[f], mesh.gvert[f], n)
+    return _search_pass(mesh, T, X, U, radius, points)[0]
+
+
+def segment_pass(mesh, S, T, X, U, radius, degree=4):
+    """Exact (segment) integration of this rank's S faces against T's faces (local and gathered): a rows.Pass."""
+    f = S.faces
+    gv, _, fx, fu, fsize = _target_faces(mesh, T, X, U, (X[f] + U[f]).reshape(-1, 3), radius)
+    return quadrature.segment_pass(mesh.face_type, X[f], X[f] + U[f], mesh.gvert[f], fx, fx + fu, gv, fsize,
+                                   radius, degree)
+
+
+def integration_pass(mesh, spec, S, T, X, U, radius):
+    """The pass "integrate S against T" with the pair's integration rule."""
+    if spec.integration == "gauss":
+        return gauss_pass(mesh, S, T, X, U, radius, spec.gauss_points)
+    if spec.integration == "segment":
+        return segment_pass(mesh, S, T, X, U, radius)
+    return project_pass(mesh, S, T, X, U, radius)[0]
 
 
 def contact_pairs_data(mesh, scene, template):
@@ -207,10 +234,10 @@ class ContactModel:
         for pd in self.pairs:
             spec = pd["spec"]
             with self._phase("search"):
-                sp, _, _ = project_pass(mesh, pd["slave"], pd["master"], X, U, pd["radius"])
+                sp = integration_pass(mesh, spec, pd["slave"], pd["master"], X, U, pd["radius"])
                 mp = None
                 if spec.formulation != "master_slave":
-                    mp, _, _ = project_pass(mesh, pd["master"], pd["slave"], X, U, pd["radius"])
+                    mp = integration_pass(mesh, spec, pd["master"], pd["slave"], X, U, pd["radius"])
             self._check_found(pd, sp, mp)
             with self._phase("rows"):
                 if spec.formulation == "master_slave":
@@ -218,7 +245,8 @@ class ContactModel:
                 elif spec.formulation == "two_pass":
                     rows = row_builders.two_pass(sp, mp)
                 else:
-                    rows = row_builders.quasi_symmetric(sp, mp, spec.weight)
+                    weight = spec.weight.to_dict() if hasattr(spec.weight, "to_dict") else spec.weight
+                    rows = row_builders.quasi_symmetric(sp, mp, weight)
                 out.append(self._term(f"contact[{pd['index']}]", rows, pd["eps_n"], pd["h_eff"],
                                       spec.enforcement == "augmented_lagrangian"))
         for dd in self.dies:

@@ -1,15 +1,20 @@
 """Constraint rows C_r = G_r . u - g_r and weights W_r of each contact formulation, as triplets with global ids.
 
-Pure NumPy (formulation.md sections 3 and 7). A "pass" integrates surface S
-against surface T with nodal quadrature: each projected S node k gives
-A_k h_k with the penetration
+Pure NumPy (formulation.md sections 3, 7 and 8). A "pass" integrates surface S
+against surface T with some quadrature of S: points x_q with weights w_q (the S
+nodes with their tributary areas for nodal quadrature, Gauss points, or the
+pieces of S faces cut by T faces for segment integration), each projected on a
+T face, with the penetration
 
-    h_k = -(u_S^k - sum_j N_j(xi) u_T^j) . n_T - delta0_k,
+    h_q = -(u_S(x_q) - sum_j N_T^j(xi_q) u_T^j) . n_T - delta0_q,
 
-n_T the T face's own outward normal at xi, frozen between two searches. The
-row of a node constraint of vertex v is dof 3 v (component slot 0); sticking
-die rows also use 3 v + 1 and 3 v + 2. The caller adds the triplets into a
-distributed matrix (duplicates are summed), so rows may belong to any rank.
+n_T the T face's own outward normal at xi_q, frozen between two searches.
+R_S = Phi_S^T diag(w) H tests h_q with S's shape functions at x_q (pass_rows),
+R_T = Phi_T^T diag(w) H with T's shape functions at the projection
+(_spread_rows). The row of a node constraint of vertex v is dof 3 v (component
+slot 0); sticking die rows also use 3 v + 1 and 3 v + 2. The caller adds the
+triplets into a distributed matrix (duplicates are summed), so rows may belong
+to any rank.
 """
 
 from dataclasses import dataclass, field
@@ -70,15 +75,21 @@ class Rows:
 
 @dataclass
 class Pass:
-    """Nodes of a surface S projected on faces of a surface T (global vertex ids), one entry per projected node."""
-    node: np.ndarray            # (p,) global vertex id of the S node
-    area: np.ndarray            # (p,) its tributary area A_k = int_S N^k ds  [m^2]
-    size: np.ndarray            # (p,) local element size on S at the node  [m]
+    """Quadrature points of a surface S projected on faces of a surface T (global vertex ids), one entry per point.
+
+    Nodal quadrature: each point is an S node (source_nodes (p, 1), source_shape 1,
+    the default when they are not given) and area its tributary area.
+    """
+    node: np.ndarray            # (p,) global vertex id of the S node (for points: the S node nearest the point)
+    area: np.ndarray            # (p,) quadrature weight w_q: area the point stands for on S  [m^2]
+    size: np.ndarray            # (p,) local element size on S at the point  [m]
     target_nodes: np.ndarray    # (p, nv) global vertex ids of the T face it projects on
     shape: np.ndarray           # (p, nv) N_T(xi) at the projection
     normal: np.ndarray          # (p, 3) T's outward unit normal at xi
     delta0: np.ndarray          # (p,) initial gap (x_S - x_closest) . n, >= 0 when apart  [m]
     target_size: np.ndarray     # (p,) size of that T face  [m]
+    source_nodes: np.ndarray = None   # (p, ns) global vertex ids of the S face holding the point
+    source_shape: np.ndarray = None   # (p, ns) N_S at the point
 
     def __post_init__(self):
         self.node = np.asarray(self.node, dtype=_I).reshape(-1)
@@ -86,19 +97,32 @@ class Pass:
         self.target_nodes = np.asarray(self.target_nodes, dtype=_I)
         if self.target_nodes.ndim != 2 or len(self.target_nodes) != p:
             raise ValueError(f"Pass.target_nodes must have shape ({p}, nv), got {self.target_nodes.shape}")
-        nv = self.target_nodes.shape[1]
+        if self.source_nodes is None:
+            self.source_nodes, self.source_shape = self.node[:, None], np.ones((p, 1))
+        self.source_nodes = np.asarray(self.source_nodes, dtype=_I)
+        if self.source_nodes.ndim != 2 or len(self.source_nodes) != p:
+            raise ValueError(f"Pass.source_nodes must have shape ({p}, ns), got {self.source_nodes.shape}")
+        nv, ns = self.target_nodes.shape[1], self.source_nodes.shape[1]
         expect = {"area": (p,), "size": (p,), "shape": (p, nv), "normal": (p, 3),
-                  "delta0": (p,), "target_size": (p,)}
+                  "delta0": (p,), "target_size": (p,), "source_shape": (p, ns)}
         for name, shp in expect.items():
             a = np.asarray(getattr(self, name), dtype=float)
             if a.shape != shp:
                 raise ValueError(f"Pass.{name} must have shape {shp}, got {a.shape}")
             setattr(self, name, a)
 
+    @staticmethod
+    def empty(ns, nv):
+        """A pass without points, for S faces with ns nodes and T faces with nv nodes."""
+        z = np.zeros(0)
+        return Pass(node=_ints(), area=z, size=z, target_nodes=np.zeros((0, nv), dtype=_I), shape=np.zeros((0, nv)),
+                    normal=np.zeros((0, 3)), delta0=z, target_size=z, source_nodes=np.zeros((0, ns), dtype=_I),
+                    source_shape=np.zeros((0, ns)))
+
     @property
-    def target_shape_for_rows(self):
-        """N_a^k(xi_a^l): the weights that spread a master-node row onto the slave face's node rows."""
-        return self.shape
+    def nodal(self):
+        """True for nodal quadrature: every point is an S node."""
+        return self.source_nodes.shape[1] == 1
 
     @staticmethod
     def from_search(node, area, size, found, face_nodes, face_size):
@@ -116,37 +140,39 @@ class Pass:
 
 
 def _pass_entries(pss):
-    """Unscaled row of each projected node: columns and values (p, 3 (1 + nv)), g (p,), W (p,)."""
+    """Unscaled h_q of each point times w_q: columns and values (p, 3 (ns + nv)), g (p,), W (p,)."""
     p, nv = pss.target_nodes.shape
+    ns = pss.source_nodes.shape[1]
     comp = np.arange(3, dtype=_I)
-    nodes = np.concatenate([pss.node[:, None], pss.target_nodes], axis=1)            # (p, 1 + nv)
-    coef = np.concatenate([-np.ones((p, 1)), pss.shape], axis=1)                       # dh/du along -n / +N_j n
-    cols = (3 * nodes[:, :, None] + comp).reshape(p, 3 * (1 + nv))
-    vals = (pss.area[:, None, None] * coef[:, :, None] * pss.normal[:, None, :]).reshape(p, 3 * (1 + nv))
+    nodes = np.concatenate([pss.source_nodes, pss.target_nodes], axis=1)               # (p, ns + nv)
+    coef = np.concatenate([-pss.source_shape, pss.shape], axis=1)                      # dh/du along -N_S n / +N_T n
+    cols = (3 * nodes[:, :, None] + comp).reshape(p, 3 * (ns + nv))
+    vals = (pss.area[:, None, None] * coef[:, :, None] * pss.normal[:, None, :]).reshape(p, 3 * (ns + nv))
     return cols, vals, pss.area * pss.delta0, pss.area.copy()
 
 
-def pass_rows(pss, scale):
-    """scale * A_k h_k on row 3 node_k: (G_rows, G_cols, G_vals, g_rows, g_vals, W_rows, W_vals)."""
-    cols, vals, g, W = _pass_entries(pss)
-    scale = np.broadcast_to(np.asarray(scale, dtype=float), (len(pss.node),))
-    row = 3 * pss.node
-    return (np.repeat(row, cols.shape[1]), cols.reshape(-1), (scale[:, None] * vals).reshape(-1),
-            row.copy(), scale * g, row.copy(), scale * W)
-
-
-def _spread_rows(pss, scale):
-    """Row l of the pass, times scale_l N^k(xi^l), added to row 3 k for every node k of its target face."""
+def _tested_rows(pss, scale, test_nodes, test_shape):
+    """Point q's w_q h_q, times scale_q N^k, added to row 3 k for every test node k (test_nodes (p, nt))."""
     cols, vals, g, W = _pass_entries(pss)
     p = len(pss.node)
     ncol = cols.shape[1]
-    f = np.broadcast_to(np.asarray(scale, dtype=float), (p,))[:, None] * pss.target_shape_for_rows   # (p, nv)
+    f = np.broadcast_to(np.asarray(scale, dtype=float), (p,))[:, None] * test_shape   # (p, nt)
     keep = f != 0.0            # N^k = 0 (on an edge) or a zero weight adds nothing
     lk, kk = np.nonzero(keep)
     fk = f[lk, kk]
-    row = 3 * pss.target_nodes[lk, kk]
+    row = 3 * test_nodes[lk, kk]
     return (np.repeat(row, ncol), cols[lk].reshape(-1), (fk[:, None] * vals[lk]).reshape(-1),
             row, fk * g[lk], row.copy(), fk * W[lk])
+
+
+def pass_rows(pss, scale):
+    """R_S: scale * w_q h_q tested by S's shape functions at the point (nodal: A_k h_k on row 3 node_k)."""
+    return _tested_rows(pss, scale, pss.source_nodes, pss.source_shape)
+
+
+def _spread_rows(pss, scale):
+    """R_T: scale * w_q h_q tested by T's shape functions at the projection, on the rows of the T face's nodes."""
+    return _tested_rows(pss, scale, pss.target_nodes, pss.shape)
 
 
 def _rows(parts, phi):
@@ -164,49 +190,62 @@ def two_pass(slave_pass, master_pass):
     return _rows([pass_rows(slave_pass, 1.0), pass_rows(master_pass, 1.0)], 0.5)
 
 
+FINER_POWER = 4.0    # the "finer" rule: w_a = h_b^4 / (h_a^4 + h_b^4) (formulation.md section 8)
+
+
+def weight_power(rule):
+    """The exponent p of a size-based weight rule ("finer" or {"power": p}), or None for a constant weight."""
+    if isinstance(rule, str):
+        if rule != "finer":
+            raise ValueError(f"weight rule must be a number in [0, 1], 'finer' or {{'power': p}}, got {rule!r}")
+        return FINER_POWER
+    if isinstance(rule, dict):
+        p = float(rule.get("power", float("nan")))
+        if set(rule) != {"power"} or not p > 0:
+            raise ValueError(f"weight rule {{'power': p}} needs exactly one key power > 0, got {rule!r}")
+        return p
+    return None
+
+
 def weights(rule, slave_size, master_size):
     """Slave-side weight w_a (w_b = 1 - w_a) of weighted quasi-symmetry, elementwise.
 
-    rule: a float in [0, 1] (constant w_a; 0.5 is the paper, 1 is master/slave)
-    or "finer": w_a = h_b^4 / (h_a^4 + h_b^4), h_a the slave-side and h_b the
+    rule: a float in [0, 1] (constant w_a; 0.5 is the paper, 1 is master/slave),
+    {"power": p}: w_a = h_b^p / (h_a^p + h_b^p), h_a the slave-side and h_b the
     master-side element size, which weights integration toward the finer side
-    whichever body is called the slave.
+    whichever body is called the slave; "finer" is p = 4.
     """
     h_a = np.asarray(slave_size, dtype=float)
     h_b = np.asarray(master_size, dtype=float)
     shape = np.broadcast(h_a, h_b).shape
-    if isinstance(rule, str):
-        if rule != "finer":
-            raise ValueError(f"weight rule must be a number in [0, 1] or 'finer', got {rule!r}")
-        a4, b4 = h_a ** 4, h_b ** 4
-        return np.broadcast_to(b4 / (a4 + b4), shape).copy()
+    p = weight_power(rule)
+    if p is not None:
+        # in ratio form, so that a large p cannot overflow: w_a = 1 / (1 + (h_a / h_b)^p)
+        r = (h_a / h_b) ** p
+        return np.broadcast_to(1.0 / (1.0 + r), shape).copy()
     w = float(rule)
     if not 0.0 <= w <= 1.0:
-        raise ValueError(f"weight rule must be a number in [0, 1] or 'finer', got {rule!r}")
+        raise ValueError(f"weight rule must be a number in [0, 1], 'finer' or {{'power': p}}, got {rule!r}")
     return np.full(shape, w)
 
 
 def quasi_symmetric(slave_pass, master_pass, weight=0.5):
-    """One row per slave node: C_k = 2 w_a A_k h_k + 2 w_b sum_l N_a^k(xi_a^l) B_l h_l, phi = 1/2 (paper [12]).
+    """One row per slave node: C = 2 w_a R_S(a on b) + 2 w_b R_T(b on a), phi = 1/2 (paper [12], section 8).
 
-    The first term is the slave pass on row 3 k; each master node l's row B_l h_l
-    (measured against slave face f_a^l) is spread on the rows of that face's
-    nodes with weights N_a^k(xi_a^l). With weight "finer" w is evaluated per
-    contribution from the two faces' sizes local to it. A slave node with no
-    projection of its own keeps the second term only. Contributions with a zero
-    weight are left out (so weight = 1 gives exactly the master/slave rows x 2).
+    R_S(a on b): the slave pass tested by the slave's shape functions. R_T(b on a):
+    each master point's row w_l h_l (measured against slave face f_a^l) tested by
+    the slave's shape functions at its projection, N_a^k(xi_a^l): the slave
+    multiplier evaluated at the master point. With nodal quadrature this is the
+    paper's master multiplier interpolated from slave nodes (paper [8]-[10]). With
+    a size-based weight rule w is evaluated per contribution from the two faces'
+    sizes local to it. A slave node with no projection of its own keeps the second
+    term only. Contributions with a zero weight are left out (so weight = 1 gives
+    exactly the master/slave rows x 2).
     """
     w_a = weights(weight, slave_pass.size, slave_pass.target_size)
-    # master pass: the slave side is the target face, the master side the projected node
+    # master pass: the slave side is the target face, the master side the projected point
     w_b = 1.0 - weights(weight, master_pass.target_size, master_pass.size)
-    first = pass_rows(slave_pass, 2.0 * w_a)
-    keep = first[6] != 0.0
-    if not keep.all():                       # w_a = 0: no first term for that node
-        ncol = len(first[0]) // max(len(keep), 1)
-        kg = np.repeat(keep, ncol)
-        first = (first[0][kg], first[1][kg], first[2][kg], first[3][keep], first[4][keep],
-                 first[5][keep], first[6][keep])
-    return _rows([first, _spread_rows(master_pass, 2.0 * w_b)], 0.5)
+    return _rows([pass_rows(slave_pass, 2.0 * w_a), _spread_rows(master_pass, 2.0 * w_b)], 0.5)
 
 
 def _tangent_basis(n):

@@ -1,0 +1,93 @@
+"""Quadratures of a contact pass "integrate S against T": nodal, Gauss points or segments, turned into rows.Pass.
+
+Pure NumPy (formulation.md section 8). Every rule yields points x_q of S faces
+with area weights w_q on the reference S surface, S's shape values there, and
+the T face each point meets, its natural coordinates, normal and initial gap.
+The search runs on the current configuration; the rows are linear in the total
+displacement, so the initial gap is measured between the reference positions
+of the same material points.
+"""
+
+import numpy as np
+
+from .. import fem
+from . import geometry
+from .rows import Pass
+
+
+def gauss_points(face_type, xs_ref, xs_cur, s_gids, n):
+    """n x n Gauss points of S faces (reference xs_ref and current xs_cur (m, nv, 3), global ids s_gids (m, nv)).
+
+    Returns a dict over the m * n^2 points: x_ref, x_cur (q, 3), weight (q,) [m^2 on the
+    reference S], source_nodes (q, nv), source_shape (q, nv), node (q,) (the face node
+    nearest the point), size (q,) (the S face's size) [m].
+    """
+    xi, w = fem.GAUSS[face_type](n)
+    N, _ = fem.SHAPE[face_type](xi)                                   # (nq, nv)
+    m, nq, nv = len(xs_ref), len(w), N.shape[1]
+    if m == 0:
+        z = np.zeros(0)
+        return {"x_ref": np.zeros((0, 3)), "x_cur": np.zeros((0, 3)), "weight": z, "size": z,
+                "source_nodes": np.zeros((0, nv), dtype=np.int64), "source_shape": np.zeros((0, nv)),
+                "node": np.zeros(0, dtype=np.int64)}
+    _, jac = fem.face_normals(face_type, xs_ref, xi)
+    src = np.repeat(np.asarray(s_gids, dtype=np.int64), nq, axis=0)
+    shp = np.tile(N, (m, 1))
+    return {"x_ref": np.einsum("qv,mvi->mqi", N, xs_ref).reshape(-1, 3),
+            "x_cur": np.einsum("qv,mvi->mqi", N, xs_cur).reshape(-1, 3),
+            "weight": (jac * w).reshape(-1), "size": np.repeat(fem.face_size(xs_ref), nq),
+            "source_nodes": src, "source_shape": shp, "node": src[np.arange(len(src)), np.argmax(shp, axis=1)]}
+
+
+def found_pass(points, found, t_gids, t_xref, t_size):
+    """The Pass of the points that found a T face; found is search.closest_faces' dict for points["x_cur"].
+
+    points: dict with x_ref, weight, size, node and optionally source_nodes, source_shape
+    (nodal quadrature when absent). t_gids (k, nv), t_xref (k, nv, 3), t_size (k,): the T
+    faces given to the search.
+    """
+    ok = found["face"] >= 0
+    f = found["face"][ok]
+    N = found["shape"][ok]
+    x_target = np.einsum("pv,pvi->pi", N, t_xref[f])
+    delta0 = np.einsum("pi,pi->p", points["x_ref"][ok] - x_target, found["normal"][ok])
+    src = points.get("source_nodes")
+    return Pass(node=points["node"][ok], area=points["weight"][ok], size=points["size"][ok],
+                target_nodes=np.asarray(t_gids)[f], shape=N, normal=found["normal"][ok], delta0=delta0,
+                target_size=np.asarray(t_size)[f], source_nodes=None if src is None else src[ok],
+                source_shape=None if src is None else points["source_shape"][ok])
+
+
+def segment_pass(face_type, xs_ref, xs_cur, s_gids, xt_ref, xt_cur, t_gids, t_size, radius, degree=4):
+    """Exact (segment) integration of S faces against T faces: the overlaps cut into quadrature points, a Pass.
+
+    The faces are clipped in their current configuration (which decides what meets what);
+    points farther than radius [m] from T along its normal are dropped; weights are areas on
+    the reference S surface, like the nodal areas.
+    """
+    from .clipping import candidate_pairs, segment_quadrature
+    nv_s, nv_t = fem.FACE_NODES[face_type], fem.FACE_NODES[face_type]
+    if len(xs_cur) == 0 or len(xt_cur) == 0:
+        return Pass.empty(nv_s, nv_t)
+    i, j = candidate_pairs(xs_cur, xt_cur, radius)
+    if len(i) == 0:
+        return Pass.empty(nv_s, nv_t)
+    q = segment_quadrature(face_type, xs_cur[i], face_type, xt_cur[j], degree=degree)
+    si, tj = i[q["pair"]], j[q["pair"]]
+    Ns, _ = fem.SHAPE[face_type](q["xi_s"])
+    Nt, _ = fem.SHAPE[face_type](q["xi_t"])
+    normal = geometry.face_normal_at(face_type, xt_cur[tj], q["xi_t"])
+    gap = np.einsum("pi,pi->p", q["x"] - np.einsum("pv,pvi->pi", Nt, xt_cur[tj]), normal)
+    k = np.abs(gap) <= radius
+    si, tj, Ns, Nt, normal = si[k], tj[k], Ns[k], Nt[k], normal[k]
+    xi_s = q["xi_s"][k]
+
+    def jac(xf):
+        return np.linalg.norm(np.cross(*geometry.face_tangents_at(face_type, xf, xi_s)), axis=-1)
+    weight = q["weight"][k] * jac(xs_ref[si]) / jac(xs_cur[si])
+    x_ref = np.einsum("pv,pvi->pi", Ns, xs_ref[si])
+    delta0 = np.einsum("pi,pi->p", x_ref - np.einsum("pv,pvi->pi", Nt, xt_ref[tj]), normal)
+    src = np.asarray(s_gids, dtype=np.int64)[si]
+    return Pass(node=src[np.arange(len(src)), np.argmax(Ns, axis=1)], area=weight, size=fem.face_size(xs_ref[si]),
+                target_nodes=np.asarray(t_gids)[tj], shape=Nt, normal=normal, delta0=delta0,
+                target_size=np.asarray(t_size)[tj], source_nodes=src, source_shape=Ns)

@@ -1,0 +1,93 @@
+"""Gauss-point and segment quadratures of a contact pass (formulation.md section 8): rows are exact derivatives,
+weights integrate the right areas, and the rules converge to exact integration."""
+
+import numpy as np
+import pytest
+
+from qsc_petsc import fem
+from qsc_petsc.contact import quadrature
+from qsc_petsc.contact.rows import master_slave, quasi_symmetric, two_pass, weights
+from qsc_petsc.contact.search import closest_faces
+
+from test_contact_kernels import away_from_kinks, check_derivatives, dense, flat, make_pass, pair, response
+
+RULES = {
+    "master_slave": lambda sp, mp: master_slave(sp),
+    "two_pass": two_pass,
+    "quasi_symmetric_0.5": lambda sp, mp: quasi_symmetric(sp, mp, 0.5),
+    "quasi_symmetric_power2": lambda sp, mp: quasi_symmetric(sp, mp, {"power": 2.0}),
+}
+
+
+def gauss_pass(S, T, n, radius=0.2):
+    xf = S.xyz[S.faces]
+    pts = quadrature.gauss_points(S.type, xf, xf, S.gfaces, n)
+    found = closest_faces(pts["x_cur"], T.xyz[T.faces], T.type, np.sort(T.gfaces, axis=1), radius)
+    return quadrature.found_pass(pts, found, T.gfaces, T.xyz[T.faces], T.face_size)
+
+
+@pytest.mark.parametrize("mesh", [(3, "quad", 4, "quad"), (4, "tri", 3, "tri")])
+@pytest.mark.parametrize("name", RULES)
+def test_gauss_rows_force_and_jacobian_are_derivatives(name, mesh):
+    """Gauss-point rows on a warped interface: G^T m shall be the energy gradient and G^T D G its Hessian."""
+    A, B, ndof = pair(*mesh)
+    rows = RULES[name](gauss_pass(A, B, 2), gauss_pass(B, A, 2))
+    u = away_from_kinks(rows, ndof, 0.01, seed=3)
+    check_derivatives(rows, ndof, u)
+
+
+@pytest.mark.parametrize("face_type", ["quad", "tri"])
+def test_gauss_weights_integrate_the_area_and_shape_functions(face_type):
+    """Gauss weights shall sum to the S area and sum_q N_S^k w_q (the row weights W) to the nodal areas."""
+    A, B, ndof = pair(3, face_type, 5, face_type)          # warped: the weights include the surface Jacobian
+    sp = gauss_pass(A, B, 2)                                # the fixture's nodal areas use the same 2 x 2 rule
+    assert len(sp.node) == len(A.faces) * 4
+    nodal = np.zeros(len(A.ids))
+    np.add.at(nodal, sp.source_nodes.ravel() - A.ids[0], (sp.source_shape * sp.area[:, None]).ravel())
+    np.testing.assert_allclose(nodal, A.area, rtol=1e-12)
+    rows = master_slave(sp)
+    W = np.zeros(ndof)
+    np.add.at(W, rows.W_rows, rows.W_vals)
+    np.testing.assert_allclose(W[3 * A.ids], A.area, rtol=1e-12)
+
+
+def test_matching_meshes_gauss_equals_nodal_mean():
+    """On matching flat meshes in contact, Gauss rows shall give the same total W and force as nodal rows."""
+    A, B, ndof = pair(4, "quad", 4, "quad", zfun=flat, gap=0.0)
+    u = np.zeros(ndof)
+    u[3 * B.ids + 2] = -1e-3                                # B pushed into A uniformly
+    for name, build in RULES.items():
+        en, Fn, _, _ = response(build(make_pass(A, B), make_pass(B, A)), ndof, u)
+        eg, Fg, _, _ = response(build(gauss_pass(A, B, 3), gauss_pass(B, A, 3)), ndof, u)
+        assert eg == pytest.approx(en, rel=1e-12), name
+        assert Fg[3 * B.ids + 2].sum() == pytest.approx(Fn[3 * B.ids + 2].sum(), rel=1e-12), name
+
+
+def mortar_matrix(S, T, rows):
+    """The matrix M[k, j] = coefficient of u_T^j . n in row k (the discrete int N_S^k N_T^j ds) of master_slave rows."""
+    G, _, _, r, _ = dense(rows, 3 * (len(S.ids) + len(T.ids)))
+    return G[:, 3 * T.ids + 2], r
+
+
+def test_gauss_mortar_integrals_converge_to_exact():
+    """On flat non-nested meshes, sum_q w_q N_S^k N_T^j shall converge to int N_S^k N_T^j ds as n grows."""
+    A, B, _ = pair(3, "quad", 7, "quad", zfun=flat)
+    ref, _ = mortar_matrix(A, B, master_slave(gauss_pass(A, B, 10)))        # 100 points per face
+    errs = [np.abs(mortar_matrix(A, B, master_slave(gauss_pass(A, B, n)))[0] - ref).max() for n in (2, 3, 5)]
+    assert errs[0] > errs[1] > errs[2]
+    # nodal quadrature is the crudest: lumping onto the S node
+    nodal, _ = mortar_matrix(A, B, master_slave(make_pass(A, B)))
+    assert np.abs(nodal - ref).max() > errs[0]
+
+
+def test_power_weight_rule():
+    """{power: p} shall give w_a = h_b^p / (h_a^p + h_b^p), "finer" p = 4, and be swap-symmetric."""
+    np.testing.assert_allclose(weights({"power": 2.0}, 1.0, 2.0), 4.0 / 5.0)
+    np.testing.assert_allclose(weights("finer", [0.5, 3.0], [1.0, 1.0]), weights({"power": 4.0}, [0.5, 3.0], [1, 1]))
+    h = np.array([0.1, 1.0, 7.0])
+    np.testing.assert_allclose(weights({"power": 30.0}, h, h[::-1]) + weights({"power": 30.0}, h[::-1], h), 1.0)
+    assert np.isfinite(weights({"power": 500.0}, 1e-3, 1e3)).all()
+    with pytest.raises(ValueError):
+        weights({"power": -1.0}, 1.0, 1.0)
+    with pytest.raises(ValueError):
+        weights("coarser", 1.0, 1.0)
