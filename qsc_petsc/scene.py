@@ -420,6 +420,10 @@ CONTACT = Table({
                           "Quadrature of the contact integrals: surface nodes (node-to-segment, the paper), "
                           "gauss_points^2 Gauss points per face, or exact segment integration over the overlaps "
                           "of the two surfaces' faces.", default="nodal"),
+    "master_multiplier": Choice(("slave_at_points", "master_nodes"),
+                                "quasi_symmetric's multiplier on the master side: the slave multiplier evaluated at "
+                                "each master quadrature point's projection, or interpolated from master-node values "
+                                "(paper [8]-[10]); the same with nodal integration.", default="slave_at_points"),
     "gauss_points": Int("Gauss points per direction on each face with integration = \"gauss\" (a triangle "
                         "gets the collapsed n x n rule).", ge=1, le=10, default=3),
     "penalty": Float("Dimensionless alpha of the penalty eps_n = alpha * E_eff / h_eff.", gt=0, default=1e4),

@@ -6,7 +6,7 @@ import pytest
 
 from qsc_petsc import fem
 from qsc_petsc.contact import quadrature
-from qsc_petsc.contact.rows import master_slave, quasi_symmetric, two_pass, weights
+from qsc_petsc.contact.rows import master_slave, quasi_symmetric, quasi_symmetric_master_nodes, two_pass, weights
 from qsc_petsc.contact.search import closest_faces
 
 from test_contact_kernels import away_from_kinks, check_derivatives, dense, flat, make_pass, pair, response
@@ -91,3 +91,29 @@ def test_power_weight_rule():
         weights({"power": -1.0}, 1.0, 1.0)
     with pytest.raises(ValueError):
         weights("coarser", 1.0, 1.0)
+
+
+@pytest.mark.parametrize("weight", [0.5, "finer"])
+def test_master_node_variant_equals_paper_rows_with_nodal_quadrature(weight):
+    """With nodal quadrature, the master-node multiplier variant shall give exactly quasi_symmetric's rows."""
+    A, B, ndof = pair(3, "quad", 4, "tri")
+    sp, mp = make_pass(A, B), make_pass(B, A)
+    G1, g1, W1, r1, _ = dense(quasi_symmetric(sp, mp, weight), ndof)
+    G2, g2, W2, r2, _ = dense(quasi_symmetric_master_nodes(sp, mp, mp, weight), ndof)
+    np.testing.assert_array_equal(r1, r2)
+    np.testing.assert_allclose(G2, G1, atol=1e-15)
+    np.testing.assert_allclose(g2, g1, atol=1e-15)
+    np.testing.assert_allclose(W2, W1, rtol=1e-14)
+
+
+@pytest.mark.parametrize("mesh", [(3, "quad", 4, "quad"), (4, "tri", 3, "quad")])
+def test_master_node_variant_with_gauss_points_is_consistent(mesh):
+    """Gauss-point master-node variant on a warped interface: exact derivatives, rows only on slave nodes,
+    and sum phi W = the contact area on a flat interface."""
+    A, B, ndof = pair(*mesh)
+    rows = quasi_symmetric_master_nodes(gauss_pass(A, B, 2), gauss_pass(B, A, 2), make_pass(B, A), {"power": 4.0})
+    assert set(np.unique(rows.W_rows) // 3) <= set(A.ids)
+    check_derivatives(rows, ndof, away_from_kinks(rows, ndof, 0.01, seed=4))
+    A, B, _ = pair(*mesh, zfun=flat)
+    rows = quasi_symmetric_master_nodes(gauss_pass(A, B, 3), gauss_pass(B, A, 3), make_pass(B, A), 0.5)
+    assert rows.phi * rows.W_vals.sum() == pytest.approx(1.0, rel=1e-12)

@@ -246,7 +246,13 @@ class ContactModel:
                     rows = row_builders.two_pass(sp, mp)
                 else:
                     weight = spec.weight.to_dict() if hasattr(spec.weight, "to_dict") else spec.weight
-                    rows = row_builders.quasi_symmetric(sp, mp, weight)
+                    if spec.master_multiplier == "master_nodes" and spec.integration != "nodal":
+                        with self._phase("search"):
+                            node_pass = project_pass(mesh, pd["master"], pd["slave"], X, U, pd["radius"])[0]
+                        rows = row_builders.quasi_symmetric_master_nodes(sp, mp, node_pass, weight,
+                                                                         move=self._to_row_owners)
+                    else:
+                        rows = row_builders.quasi_symmetric(sp, mp, weight)
                 out.append(self._term(f"contact[{pd['index']}]", rows, pd["eps_n"], pd["h_eff"],
                                       spec.enforcement == "augmented_lagrangian"))
         for dd in self.dies:
@@ -262,6 +268,17 @@ class ContactModel:
                 out.append(self._term(f"die[{dd['index']}]", rows, dd["eps_n"], dd["h"], False))
         self.current = out
         return out
+
+    def _to_row_owners(self, parts):
+        """Row triplets (G_rows, G_cols, G_vals, g_rows, g_vals, W_rows, W_vals) moved to their rows' owners."""
+        comm = self.comm
+        starts = 3 * assembly.ownership_starts(comm, self.mesh.owned.sum())
+        G_r, G_c, G_v, g_r, g_v, W_r, W_v = parts
+        G = assembly.send_to_owners(comm, starts, np.asarray(G_r, np.int64), np.asarray(G_c, np.int64),
+                                    np.asarray(G_v, float))
+        g = assembly.send_to_owners(comm, starts, np.asarray(g_r, np.int64), np.asarray(g_v, float))
+        W = assembly.send_to_owners(comm, starts, np.asarray(W_r, np.int64), np.asarray(W_v, float))
+        return (*G, *g, *W)
 
     def _check_found(self, pd, sp, mp):
         """Surfaces declared in contact must meet within the search distance somewhere (all ranks agree)."""

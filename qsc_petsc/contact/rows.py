@@ -248,6 +248,52 @@ def quasi_symmetric(slave_pass, master_pass, weight=0.5):
     return _rows([pass_rows(slave_pass, 2.0 * w_a), _spread_rows(master_pass, 2.0 * w_b)], 0.5)
 
 
+def project_master_rows(parts, node_pass):
+    """P^T R: each row 3 l of the triplets parts (R's (G_rows, G_cols, G_vals, g_rows, g_vals, W_rows, W_vals)),
+    times N_a^k(xi_a^l), moved to row 3 k of every node k of the slave face master node l projects on.
+
+    node_pass: the nodal pass of master nodes on the slave (master node l -> slave face, shape values):
+    the master multiplier interpolated from slave-node values (paper [8]-[10]). Rows of master nodes
+    without a projection here are dropped. Pure join on l; the caller puts R's rows on the rank that
+    holds l's projection.
+    """
+    G_r, G_c, G_v, g_r, g_v, W_r, W_v = parts
+    order = np.argsort(node_pass.node, kind="stable")
+    known = node_pass.node[order]
+
+    def spread(rows, *vals):
+        l = np.asarray(rows, dtype=_I) // 3
+        i = np.minimum(np.searchsorted(known, l), max(len(known) - 1, 0))
+        hit = (known[i] == l) if len(known) else np.zeros(len(l), dtype=bool)
+        pos = order[i[hit]]
+        N = node_pass.shape[pos]                                   # (h, nv)
+        e, kk = np.nonzero(N != 0.0)
+        src = np.flatnonzero(hit)[e]
+        return (3 * node_pass.target_nodes[pos[e], kk],) + tuple(np.asarray(v)[src] * N[e, kk] if v is not None
+                                                                 else None for v in vals), src
+
+    (G_rows, _, G_vals), src = spread(G_r, None, G_v)
+    (g_rows, g_vals), _ = spread(g_r, g_v)
+    (W_rows, W_vals), _ = spread(W_r, W_v)
+    return G_rows, np.asarray(G_c, dtype=_I)[src], G_vals, g_rows, g_vals, W_rows, W_vals
+
+
+def quasi_symmetric_master_nodes(slave_pass, master_pass, master_node_pass, weight=0.5, move=None):
+    """quasi_symmetric with the master multiplier from master-node values: C = 2 w_a R_S(a on b) + 2 w_b P^T R_S(b on a).
+
+    master_pass: the master's quadrature points on the slave (rows tested by the master's shape
+    functions); master_node_pass: the master nodes' projections (P). With nodal quadrature both
+    passes are the same and this equals quasi_symmetric. move(parts) -> parts, if given, first routes
+    R_S(b on a)'s triplets to where master_node_pass lives (parallel runs).
+    """
+    w_a = weights(weight, slave_pass.size, slave_pass.target_size)
+    w_b = 1.0 - weights(weight, master_pass.target_size, master_pass.size)
+    R = pass_rows(master_pass, 2.0 * w_b)
+    if move is not None:
+        R = move(R)
+    return _rows([pass_rows(slave_pass, 2.0 * w_a), project_master_rows(R, master_node_pass)], 0.5)
+
+
 def _tangent_basis(n):
     """Two unit tangents t1, t2 with (t1, t2, n) orthonormal, built deterministically from n."""
     e = np.zeros(3)
