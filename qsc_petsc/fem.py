@@ -160,12 +160,18 @@ def face_nodal_areas(face_type, xf, n_gauss=2):
 
 
 def face_pressure_loads(face_type, xf, pressure, n_gauss=2):
-    """Consistent nodal forces (m, nv, 3) of a pressure (m,) acting against the outward normal of each face."""
+    """Consistent nodal forces (m, nv, 3) of a pressure acting against the outward normal of each face.
+
+    pressure: a number, per face (m,), or a function of points (n, 3) -> (n,) evaluated at the Gauss points."""
     xi, w = GAUSS[face_type](n_gauss)
     N, _ = SHAPE[face_type](xi)
     t = face_tangents(face_type, xf, xi)
     dA = np.cross(t[..., 0], t[..., 1])                # outward normal times area density
-    return -np.einsum("m,q,qv,mqi->mvi", np.broadcast_to(pressure, (len(xf),)), w, N, dA)
+    if callable(pressure):
+        p = pressure(np.einsum("qv,mvi->mqi", N, xf).reshape(-1, 3)).reshape(len(xf), len(w))
+    else:
+        p = np.broadcast_to(np.asarray(pressure, dtype=float).reshape(-1, 1), (len(xf), len(w)))
+    return -np.einsum("mq,q,qv,mqi->mvi", p, w, N, dA)
 
 
 def face_size(xf):

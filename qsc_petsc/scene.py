@@ -252,6 +252,25 @@ class ListOf(Field):
         return self.item.children(path + "[]")
 
 
+class NumberOrExpression(Float):
+    """A number, or a string expression in the coordinates x, y, z [m] (see qsc_petsc.expression)."""
+
+    kind = "float or expression in x, y, z"
+
+    def check(self, value, path):
+        if isinstance(value, str):
+            from .expression import ExpressionError, compile_expression
+            try:
+                compile_expression(value)
+            except ExpressionError as exc:
+                raise SceneError(f"{path}: {exc}, got {_show(value)}") from None
+            return value
+        return super().check(value, path)
+
+    def type_text(self):
+        return self.kind
+
+
 class WeightRule(Float):
     """Quasi-symmetric weight: a constant w_a in [0, 1], "finer", or a table {power = p} (p > 0)."""
 
@@ -404,7 +423,9 @@ BOUNDARY = Variant("type", "Kind of boundary condition.", common={
         "uy": Float("Prescribed y displacement at the last load step; absent means free.", default=None, unit="m"),
         "uz": Float("Prescribed z displacement at the last load step; absent means free.", default=None, unit="m"),
     },
-    "pressure": {"value": Float("Pressure at the last load step; positive pushes into the body.", unit="Pa")},
+    "pressure": {"value": NumberOrExpression("Pressure at the last load step; positive pushes into the body. A "
+                                             "string is a field in x, y, z [m], e.g. \"1 + 0.5*cos(pi*x)*cos(pi*y)\".",
+                                             unit="Pa")},
     "symmetry": {},  # zero normal displacement; the mesh layer checks the plane is axis-aligned
 })
 
