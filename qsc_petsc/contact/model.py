@@ -253,8 +253,11 @@ class ContactModel:
                                                                          move=self._to_row_owners)
                     else:
                         rows = row_builders.quasi_symmetric(sp, mp, weight)
-                out.append(self._term(f"contact[{pd['index']}]", rows, pd["eps_n"], pd["h_eff"],
-                                      spec.enforcement == "augmented_lagrangian"))
+                term = self._term(f"contact[{pd['index']}]", rows, pd["eps_n"], pd["h_eff"],
+                                  spec.enforcement == "augmented_lagrangian")
+                term.points = self.comm.allreduce(len(sp.node) + (len(mp.node) if mp is not None else 0),
+                                                  op=MPI.SUM)
+                out.append(term)
         for dd in self.dies:
             spec = dd["spec"]
             with self._phase("rows"):
@@ -310,7 +313,8 @@ class ContactModel:
             F = _term_force(term, u)
             entry = {"rows": self.comm.allreduce(len(term.rows), op=MPI.SUM),
                      "active_rows": self.comm.allreduce(int(term.active.sum()), op=MPI.SUM),
-                     "eps_n": pd["eps_n"], "h_eff": pd["h_eff"]}
+                     "eps_n": pd["eps_n"], "h_eff": pd["h_eff"], "integration": pd["spec"].integration,
+                     "quadrature_points": term.points, "G_nonzeros": int(term.G.getInfo()["nz_used"])}
             W = term.W.getArray()[term.rows]
             entry["contact_area"] = self.comm.allreduce(float(term.phi * W[term.active].sum()), op=MPI.SUM)
             mean_pen = {}
