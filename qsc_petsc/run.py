@@ -13,6 +13,7 @@ from . import __version__, assembly, elasticity, options
 from .errors import QscError, SceneError
 from .mesh import distribute_mesh, on_root
 from .output import ResultWriter, write_json
+from .restraint import Restraint, describe
 from .solver import System, solve_load_step
 
 
@@ -83,6 +84,8 @@ class Run:
             self.system = System(K, self.f_ext, self.bc_dofs, bc_values, nullspace, comm,
                                  scene.solver.max_active_set_iterations)
             self.n_constrained = comm.allreduce(len(self.bc_dofs), op=MPI.SUM)
+            self.restraint = Restraint(mesh, self.bc_dofs, u)
+            self.system.free_motions = lambda terms, active: describe(self.restraint.free(terms, active))
         self.contact = None
         if scene.contact or scene.die:
             from .contact.model import ContactModel
@@ -212,5 +215,6 @@ class Run:
     def destroy(self):
         options.remove_options(self.from_scene)   # scene options live only while their run does
         self.system.destroy()
+        self.restraint.destroy()
         if self.contact is not None:
             self.contact.destroy()

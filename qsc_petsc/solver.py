@@ -11,7 +11,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from .contact.penalty import multipliers_update, row_response
-from .errors import ConvergenceError
+from .errors import ConvergenceError, SceneError
 
 SNES_REASONS = {v: k for k, v in vars(PETSc.SNES.ConvergedReason).items() if not k.startswith("_")}
 KSP_REASONS = {v: k for k, v in vars(PETSc.KSP.ConvergedReason).items() if not k.startswith("_")}
@@ -35,7 +35,10 @@ class ConstraintTerm:
         self.active = np.zeros(len(self.rows), dtype=bool)
         self.d = np.zeros(len(self.rows))
         self.energy = 0.0
-        self.start = False             # first iteration of an increment: every row within reach is active
+        # first iteration of an increment: every row within reach is closed, force of either sign, so that the
+        # first Newton step solves the glued problem (a gap closes in one step; a body held only by contact is
+        # never singular there) and the semi-smooth iterations open what must open
+        self.start = False
 
     def evaluate(self, u):
         """Row values, multipliers and active set at u (collective)."""
@@ -44,7 +47,7 @@ class ConstraintTerm:
         c = self.c.getArray()[self.rows]
         tol = np.full(len(c), np.inf) if self.start else self.closed_tol
         self.energy, m, self.d, self.active = row_response(
-            c, self.W.getArray()[self.rows], self.eps_n, self.phi, tol, self.lmbda, self.gate_of)
+            c, self.W.getArray()[self.rows], self.eps_n, self.phi, tol, self.lmbda, self.gate_of, self.start)
         marr = self.m.getArray()
         marr[:] = 0.0
         marr[self.rows] = m
@@ -96,6 +99,10 @@ class System:
         self.J = K
         self.t = 0.0
         self.prev_active = None
+        # free_motions(terms, active_only) -> "" or the rigid motions the boundaries and rows leave free
+        # (restraint.Restraint); a solve never converges to an active set that leaves a body free
+        self.free_motions = None
+        self.free_now = self.free_seen = ""
 
         self.snes = PETSc.SNES().create(comm=comm)
         self.snes.setOptionsPrefix("qsc_")
@@ -182,7 +189,13 @@ class System:
             return PETSc.SNES.ConvergedReason.CONVERGED_FNORM_ABS if fnorm <= atol else 0
         if not np.isfinite(fnorm):
             return PETSc.SNES.ConvergedReason.DIVERGED_FNORM_NAN
+        if self.free_motions is not None and self.terms and (changed or first):
+            # with a body free the Jacobian is singular: a direct solver's answer is round-off in that motion
+            self.free_now = self.free_motions(self.terms, True)
+            self.free_seen = self.free_now or self.free_seen
         if changed == 0 and not first:
+            if self.free_now:
+                return PETSc.SNES.ConvergedReason.DIVERGED_JACOBIAN_DOMAIN
             if fnorm <= atol:
                 return PETSc.SNES.ConvergedReason.CONVERGED_FNORM_ABS
             if fnorm <= rtol * self.force_scale:
@@ -197,9 +210,9 @@ class System:
         """One SNES solve at load factor t from initial guess u0; returns (ok, stats)."""
         self.t = t
         self.prev_active = None
+        self.free_now = self.free_seen = ""
         for term in self.terms:
-            # rows with a gap get stiffness but no force in the first Jacobian, so a body held only by
-            # contact is not singular there (formulation.md section 4, zero-gap start)
+            # every row within reach starts closed (formulation.md section 4, zero-gap start; see ConstraintTerm)
             term.start = True
         u = u0.copy()
         u.getArray()[self.bc_local] = t * self.ubar.getArray()[self.bc_local]
@@ -221,6 +234,8 @@ class System:
             "ksp_reason": KSP_REASONS.get(ksp_reason, str(ksp_reason)),
             "active_rows": self.active_count(),
         }
+        if reason <= 0 and self.free_seen:
+            stats["free_motion"] = self.free_seen
         return reason > 0, u, stats
 
     def destroy(self):
@@ -231,13 +246,21 @@ class System:
 
 def solve_load_step(system, step, t_prev, t_target, u, update_terms, max_cutbacks,
                     augmented_tol=1e-6, augmented_max=25, log=None):
-    """Advance from t_prev to t_target, halving the increment on failure; returns (u, stats)."""
+    """Advance from t_prev to t_target, halving the increment on failure; returns (u, stats).
+
+    A body that the boundary conditions and every contact row within reach leave free is a scene
+    error (System.free_motions); a failed solve names what its iterates left free."""
     dt = t_target - t_prev
     t = t_prev
     cutbacks, records = 0, []
     while t < t_target - 1e-14:
         t_try = min(t + dt, t_target)
         system.set_terms(update_terms(u, t_try))
+        free = system.free_motions(system.terms, False) if system.free_motions else ""
+        if free:
+            raise SceneError(f"load step {step}: free rigid-body motion of {free}: no displacement or symmetry "
+                             f"boundary holds it and no contact row or die within reach does (frictionless "
+                             f"contact holds the normal direction only); add a boundary condition")
         ok, u_new, stats = system.solve_at(t_try, u)
         augmented = [term for term in system.terms if term.augmented]
         outer = 0
@@ -266,9 +289,12 @@ def solve_load_step(system, step, t_prev, t_target, u, update_terms, max_cutback
             log(f"step {step}: solve at load factor {t_try:.6g} failed "
                 f"({stats['snes_reason']}, KSP {stats['ksp_reason']}); cutting the increment in half")
         if cutbacks > max_cutbacks:
+            free = stats.get("free_motion", "")
+            why = (f"; an iterate left {free} held by no boundary and no closed contact row (a body held only "
+                   f"by contact that separates has no equilibrium)") if free else ""
             raise ConvergenceError(
                 f"load step {step} (load factor {t_try:.6g}) did not converge after {max_cutbacks} "
                 f"cutbacks: SNES {stats['snes_reason']} after {stats['snes_iterations']} iterations, "
-                f"KSP {stats['ksp_reason']}")
+                f"KSP {stats['ksp_reason']}{why}")
         dt *= 0.5
     return u, {"cutbacks": cutbacks, "solves": records}

@@ -64,7 +64,7 @@ material = { youngs_modulus = 1000.0 }
 
 [[bodies]]
 name = "upper"
-mesh = { type = "box", origin = [0.0, 0.0, 0.53], size = [1.0, 1.0, 0.5], cells = [3, 3, 1] }
+mesh = { type = "box", origin = [0.0, 0.0, 0.47], size = [1.0, 1.0, 0.5], cells = [3, 3, 1] }
 material = { youngs_modulus = 1000.0 }
 
 [[boundary]]
@@ -79,7 +79,7 @@ surface = "upper.zmax"
 type = "displacement"
 ux = 0.0
 uy = 0.0
-uz = -0.05
+uz = 0.05
 
 [[contact]]
 slave = "upper.zmin"
@@ -87,6 +87,11 @@ master = "lower.zmax"
 
 [load]
 steps = 2
+
+[petsc]
+ksp_type = "preonly"
+pc_type = "lu"
+pc_factor_mat_solver_type = "mumps"
 """
 
 
@@ -300,7 +305,8 @@ def test_failed_load_step_exits_3_and_keeps_earlier_steps(tmp_path, ranks):
     summary.json shall say "failed" and the results of the steps before it shall stay readable."""
     scene = tmp_path / "gap.toml"
     scene.write_text(GAP)
-    # Calibrate on a free run: step 2 (the gap closes) needs more Newton iterations than step 1.
+    # Calibrate on a free run: the blocks start 0.03 m into each other and the upper one is pulled up by
+    # 0.05 m; step 2 (they separate: its glued first iterate must open) needs more Newton iterations than step 1.
     code, out = qsc(["run", scene, "--out", tmp_path / "free"], ranks)
     assert code == 0, out
     steps = _summary(tmp_path / "free")["steps"]

@@ -56,13 +56,15 @@ def _equality_mask(gate_of, r):
     return eq, gate_of
 
 
-def row_response(c, W, eps_n, phi, closed_tol=None, lmbda=None, gate_of=None):
+def row_response(c, W, eps_n, phi, closed_tol=None, lmbda=None, gate_of=None, bilateral=False):
     """Energy, row forces m (r,), row stiffnesses d (r,) and active set (r,) of rows c = G u - g with weights W.
 
     eps_n: penalty stiffness [Pa/m]; phi: the formulation's factor (scalar or (r,)).
     closed_tol (r,) or scalar: rows with c >= -closed_tol count as active (closed-set
-    start; their force is still 0). lmbda (r,): augmented-Lagrangian multipliers [Pa].
+    start; their force is 0 unless bilateral). lmbda (r,): augmented-Lagrangian multipliers [Pa].
     gate_of (r,): position of each gated (equality) row's gate row, -1 for ordinary rows.
+    bilateral: every active row is an equality (force of either sign), as in the first
+    iteration of an increment: the Newton step from there solves the closed (glued) problem.
     """
     c = np.asarray(c, dtype=float)
     W = np.asarray(W, dtype=float)
@@ -83,7 +85,7 @@ def row_response(c, W, eps_n, phi, closed_tol=None, lmbda=None, gate_of=None):
     eq, gate_of = _equality_mask(gate_of, r)
     if eq.any():
         active[eq] = active[gate_of[eq]] & exists[eq]
-    mult = np.where(active, np.where(eq, a, np.maximum(a, 0.0)), 0.0)
+    mult = np.where(active, np.where(eq | bilateral, a, np.maximum(a, 0.0)), 0.0)
     phi = np.asarray(phi, dtype=float)
     m = phi * mult
     d = np.where(active, phi * eps_n / Ws, 0.0)

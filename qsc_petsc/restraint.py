@@ -1,0 +1,110 @@
+"""Which rigid-body motions of the bodies no displacement boundary and no contact row holds (every body must be held).
+
+A body that nothing holds in some direction makes the Jacobian singular. A direct solver
+then returns one of infinitely many answers, picked by round-off (a silent wrong
+displacement), and an iterative one stalls with a reason that does not say why. So the
+constraints are checked against the rigid-body motions themselves: with B the matrix whose
+rows are the held dofs' components of every body's six rigid motions and, for each contact
+row r, (G_r v) / W_r (the row's weighted normal velocity, dimensionless), a motion v is free
+iff B v = 0; the null space of the Gram matrix B^T B (6 per body, all-reduced) names them.
+"""
+
+import numpy as np
+from mpi4py import MPI
+
+MODES = ("translation x", "translation y", "translation z", "rotation about x", "rotation about y",
+         "rotation about z")
+# B^T B eigenvalues below this fraction of the largest are a null space: a held direction
+# contributes O(1) per held dof or row, an unheld one round-off (1e-16 relative)
+FREE_TOL = 1e-9
+# a mode is reported when at least this share of it lies in the free space
+SHOW_TOL = 0.3
+
+
+def rigid_velocities(x, centre, length):
+    """Nodal velocities (n, 3, 6) of the six rigid motions at points x (n, 3): unit translations, and
+    rotations about centre at unit angular speed scaled by 1/length (unit speed at distance length)."""
+    x = np.asarray(x, dtype=float).reshape(-1, 3)
+    v = np.zeros((len(x), 3, 6))
+    v[:, [0, 1, 2], [0, 1, 2]] = 1.0
+    r = (x - np.asarray(centre, dtype=float)) / length
+    for k, axis in enumerate(np.eye(3)):
+        v[:, :, 3 + k] = np.cross(axis, r)
+    return v
+
+
+def free_motions(gram, body_names):
+    """The free motions of a Gram matrix B^T B (6 nb, 6 nb): {body name: [mode names]}, empty if all are held."""
+    gram = np.asarray(gram, dtype=float)
+    gram = 0.5 * (gram + gram.T)
+    w, vec = np.linalg.eigh(gram)
+    top = max(float(w.max(initial=0.0)), 0.0)
+    null = vec[:, w <= FREE_TOL * top] if top > 0 else np.eye(len(gram))
+    if null.shape[1] == 0:
+        return {}
+    share = np.linalg.norm(null, axis=1).reshape(len(body_names), 6)
+    out = {}
+    for b, name in enumerate(body_names):
+        modes = [MODES[k] for k in range(6) if share[b, k] >= SHOW_TOL]
+        if modes:
+            out[name] = modes
+    if not out:    # a free combination spread thin over many modes: name its largest parts
+        b, k = np.unravel_index(int(np.argmax(share)), share.shape)
+        out[body_names[b]] = [MODES[k]]
+    return out
+
+
+def describe(free):
+    """One line naming the free motions: 'upper (translation x, rotation about z)'."""
+    return "; ".join(f"{name} ({', '.join(modes)})" for name, modes in free.items())
+
+
+class Restraint:
+    """The rigid motions of every body on this rank's owned dofs, and the check of a set of constraints against them."""
+
+    def __init__(self, mesh, bc_dofs, template):
+        comm = mesh.comm
+        self.comm, self.names = comm, list(mesh.body_names)
+        nb = len(self.names)
+        r0 = template.getOwnershipRange()[0]
+        owned = np.flatnonzero(mesh.owned)
+        body_of = np.full(len(mesh.coords), -1)
+        for b in range(nb):
+            body_of[mesh.body_vertices(b)] = b
+        # (owned dofs, 6 nb) columns: each body's six motions, zero elsewhere
+        self.R = np.zeros((3 * len(owned), 6 * nb))
+        rows = (3 * mesh.gvert[owned] - r0)[:, None] + np.arange(3)
+        for b in range(nb):
+            x = mesh.coords[owned[body_of[owned] == b]]
+            lo, hi = np.empty(3), np.empty(3)
+            comm.Allreduce(x.min(axis=0) if len(x) else np.full(3, np.inf), lo, op=MPI.MIN)
+            comm.Allreduce(x.max(axis=0) if len(x) else np.full(3, -np.inf), hi, op=MPI.MAX)
+            length = float(np.linalg.norm(hi - lo)) or 1.0
+            sel = body_of[owned] == b
+            self.R[rows[sel].ravel(), 6 * b:6 * b + 6] = rigid_velocities(x, 0.5 * (lo + hi), length).reshape(-1, 6)
+        held = self.R[(np.asarray(bc_dofs, dtype=np.int64) - r0)]
+        self.gram_bc = held.T @ held
+        self.work = template.duplicate()
+
+    def free(self, terms, active_only):
+        """Free motions under the boundary conditions and the terms' rows (all existing rows, or only the active
+        ones): {body name: [mode names]}, the same on every rank (collective)."""
+        gram = self.gram_bc.copy()
+        for term in terms:
+            keep = term.active if active_only else np.ones(len(term.rows), dtype=bool)
+            rows = term.rows[keep]
+            W = term.W.getArray()[rows]
+            y = term.G.createVecLeft()
+            block = np.zeros((len(rows), self.R.shape[1]))
+            for k in range(self.R.shape[1]):
+                self.work.getArray()[:] = self.R[:, k]
+                term.G.mult(self.work, y)
+                block[:, k] = y.getArray()[rows] / W
+            y.destroy()
+            gram += block.T @ block
+        total = np.empty_like(gram)
+        self.comm.Allreduce(gram, total, op=MPI.SUM)
+        return free_motions(total, self.names)
+
+    def destroy(self):
+        self.work.destroy()
