@@ -1,0 +1,88 @@
+"""Stability at the extremes in parallel (issue 5, part 3): the interface on one rank or split across all ranks,
+extreme cases and edge/vertex ties on N ranks, and the diagnostics raised on every rank together.
+
+Runs serially in the suite and under mpirun -n 2 and -n 3; every run is compared with the same scene on
+one rank (MPI.COMM_SELF), and assertions use values that all ranks share."""
+
+import sys
+
+import pytest
+from conftest import ROOT, all_close
+from mpi4py import MPI
+
+sys.path.insert(0, str(ROOT / "scripts"))
+import stability as S
+
+FORMULATIONS = list(S.FORMULATIONS)
+
+
+def against_serial(comm, tmp, sc):
+    """(run on comm, run on one rank); both must converge."""
+    par = S.measure(sc, comm, tmp / "w")
+    ser = S.measure(sc, MPI.COMM_SELF, tmp / f"s{comm.rank}")
+    assert all_close(comm, par["status"] == "ok" and ser["status"] == "ok")
+    assert all_close(comm, par["finite"])
+    return par, ser
+
+
+@pytest.mark.parametrize("formulation", FORMULATIONS)
+@pytest.mark.parametrize("layout", ["one_rank", "split"])
+def test_interface_on_one_rank_or_split(comm, mpi_tmp, layout, formulation):
+    """With the whole interface on rank 0 (a bystander body fills the other ranks), or with the slave surface cut
+    between ranks and every rank owning interface faces, the N-rank answer shall equal the serial one
+    (displacements to 1e-10 relative, contact force to 1e-10, the same Newton iterations)."""
+    with S.simple_partitioner():
+        sc = S.layout_scene(layout, formulation)
+        slave_ranks, master_ranks = S.interface_ranks(comm, sc)
+        if comm.size > 1 and layout == "one_rank":
+            assert slave_ranks == [0] and master_ranks == [0]
+        if comm.size > 1 and layout == "split":
+            assert sorted(set(slave_ranks) | set(master_ranks)) == list(range(comm.size))
+            assert len(slave_ranks) > 1
+        par, ser = against_serial(comm, mpi_tmp, sc)
+    assert all_close(comm, S.relative_difference(par["u"], ser["u"]) <= 1e-10)
+    assert par["pair"]["total_normal_force"] == pytest.approx(ser["pair"]["total_normal_force"], rel=1e-10)
+    assert par["newton"] == ser["newton"]
+
+
+CASES = {
+    "alpha 1e8": S.cells(3, 5) + ["contact.0.penalty=1e8"],
+    "alpha 1e10, matching": S.cells(3, 3) + ["contact.0.penalty=1e10"],
+    "E ratio 1e4": S.cells(3, 5) + S.moduli(1e4),
+    "nu 0.499": S.cells(3, 5) + ["bodies.0.material.poissons_ratio=0.499", "bodies.1.material.poissons_ratio=0.499"],
+    "initial penetration": S.cells(3, 5) + ["bodies.1.mesh.origin=[0,0,0.49]"],
+    "gap closed by the load": S.cells(3, 5) + ["bodies.1.mesh.origin=[0,0,0.51]"],
+    "ties hex 3/6": S.tie_sets("hex", 3, 6, "quasi_symmetric"),
+    "ties tet 4/2": S.tie_sets("tet", 4, 2, "two_pass"),
+    "ratio 1:8, master_slave": S.cells(1, 8) + ["contact.0.formulation=master_slave"],
+    "ratio 8:1, quasi_symmetric": S.cells(8, 1),
+}
+# condition numbers ~4e9 and ~4e11: the round-off of the contact force (eps_n times a penetration of 1e-12 m
+# or less) and of the displacements differs with the partition
+TOL = {"alpha 1e8": (1e-8, 1e-6), "alpha 1e10, matching": (1e-6, 1e-5)}
+
+
+@pytest.mark.parametrize("case", CASES)
+def test_extremes_are_rank_invariant(comm, mpi_tmp, case):
+    """Each extreme case shall give the serial answer on N ranks (default partitioner): displacements and the
+    contact force to 1e-8 relative (at alpha 1e8 the force to 1e-6; at alpha 1e10 u to 1e-6, the force to 1e-5)."""
+    par, ser = against_serial(comm, mpi_tmp, S.scene(sets=CASES[case]))
+    tol_u, tol_f = TOL.get(case, (1e-8, 1e-8))
+    assert all_close(comm, S.relative_difference(par["u"], ser["u"]) <= tol_u)
+    assert par["pair"]["total_normal_force"] == pytest.approx(ser["pair"]["total_normal_force"], rel=tol_f)
+    assert par["stress_error"] == pytest.approx(ser["stress_error"], rel=1e-6, abs=1e-9)
+
+
+@pytest.mark.parametrize("name, error, text", [
+    ("upper with no displacement boundary", "SceneError", "upper (translation x, translation y, rotation about z)"),
+    ("touching, upper held only by contact, pulled", "ConvergenceError", "upper (translation z)"),
+    ("one block on a frictionless die", "SceneError", "lower (translation x, translation y, rotation about z)"),
+])
+def test_unheld_bodies_stop_every_rank(comm, mpi_tmp, name, error, text):
+    """A body that nothing holds stops the run on every rank together with the same one-line diagnostic."""
+    cases, _ = S.special_cases()
+    sc = next(s for n, _, s in cases if n.startswith(name))
+    res = S.measure(sc, comm, mpi_tmp)
+    messages = comm.allgather((res["status"], res.get("message", "")))
+    assert all(m == messages[0] for m in messages)
+    assert res["status"] == error and text in res["message"]

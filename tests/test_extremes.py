@@ -1,0 +1,246 @@
+"""Stability at the extremes (issue 5, part 3): every case converges to the known answer or stops with a
+clear diagnostic; never NaN, never a silent wrong answer. Tiny patch-test scenes, MUMPS LU, serial.
+
+The measures come from scripts/stability.py, which writes the same cases' numbers into docs/stability.md.
+"""
+
+import sys
+
+import numpy as np
+import pytest
+from conftest import ROOT
+
+sys.path.insert(0, str(ROOT / "scripts"))
+import stability as S
+
+from qsc_petsc.contact.penalty import row_response
+from qsc_petsc.restraint import MODES, free_motions, rigid_velocities
+
+FORMULATIONS = list(S.FORMULATIONS)
+
+
+def ok(res):
+    """The run converged and every displacement and stress is finite."""
+    assert res["status"] == "ok", res.get("message")
+    assert res["finite"]
+    return res
+
+
+# ---------------------------------------------------------------- penalty
+
+@pytest.mark.parametrize("alpha", S.ALPHAS)
+def test_penalty_from_1_to_1e10(alpha):
+    """For alpha 1e0 to 1e10 the matching patch test shall give sigma_zz = -p to 1e-8, the row penetration
+    p/eps_n (to 1e-6, 1e-3 at 1e10 where it is 4e-14 m on displacements of 1e-3 m) and the contact force pA."""
+    res = ok(S.measure(S.scene(sets=S.cells(2, 2) + [f"contact.0.penalty={alpha}"])))
+    extreme = float(alpha) > 1e8
+    assert res["stress_error"] <= 1e-8
+    assert abs(S.penetration_ratio(res) - 1.0) <= (1e-3 if extreme else 1e-6)
+    assert S.force_error(res) <= (1e-6 if extreme else 1e-8)
+    assert res["newton"] <= 3
+
+
+def test_conditioning_grows_linearly_with_alpha():
+    """The Jacobian's 2-norm condition number (dense SVD on the free dofs) shall grow like alpha: the penalty
+    is the stiffest term, and nothing else degrades."""
+    cond = {a: S.measure(S.scene(sets=S.cells(2, 2) + [f"contact.0.penalty={a}"]), condition=True)["condition"]
+            for a in ("1e4", "1e8")}
+    assert 0.5e4 <= cond["1e8"] / cond["1e4"] <= 2e4
+
+
+def test_iterative_solver_at_extreme_penalty_is_not_silent():
+    """With CG + GAMG at alpha = 1e8 the run shall either reach sigma_zz = -p or stop with a ConvergenceError
+    naming the KSP reason (measured: DIVERGED_INDEFINITE_PC), never return a wrong answer."""
+    res = S.measure(S.scene(sets=S.cells(4, 4, 2) + ["contact.0.penalty=1e8"], edit=S.petsc(S.GAMG)))
+    if res["status"] == "ok":
+        assert res["finite"] and res["stress_error"] <= 1e-6
+    else:
+        assert res["status"] == "ConvergenceError" and "KSP DIVERGED" in res["message"]
+
+
+# ---------------------------------------------------------------- mesh ratio
+
+BOUND = {"two_pass": 1e-4, "quasi_symmetric, finer": 2e-2, "quasi_symmetric, Gauss 5x5, {power=4}": 1e-3}
+
+
+@pytest.mark.parametrize("rule", S.RATIO_RULES)
+@pytest.mark.parametrize("lower, upper", S.RATIO_PAIRS, ids=lambda n: str(n))
+def test_mesh_ratio(lower, upper, rule):
+    """From a 16x finer to a 16x coarser slave every rule shall converge with the contact force in equilibrium
+    (1e-8); two_pass, the finer-side and the Gauss rules stay accurate; master_slave and the paper's
+    quasi_symmetric are exact or nearly so with a finer slave, and where a coarse slave makes them wrong the
+    summary shows it: master nodes penetrate by more than 100 p/eps_n."""
+    res = ok(S.measure(S.scene(sets=S.cells(lower, upper) + S.RATIO_RULES[rule])))
+    assert S.force_error(res) <= 1e-8
+    master_pen = res["pair"]["max_penetration_master"] * res["pair"]["eps_n"]     # in units of p / eps_n
+    if rule in BOUND:
+        assert res["stress_error"] <= BOUND[rule]
+    elif lower <= upper:                          # slave as fine as the master or finer
+        assert res["stress_error"] <= (1e-8 if rule == "master_slave" else 1e-4)
+    assert res["stress_error"] <= 1e-2 or master_pen >= 100.0
+
+
+# ---------------------------------------------------------------- materials
+
+@pytest.mark.parametrize("formulation", FORMULATIONS)
+@pytest.mark.parametrize("ratio", S.E_RATIOS)
+def test_youngs_modulus_ratio(ratio, formulation):
+    """E_upper / E_lower from 1e-4 to 1e4: matching meshes exact (sigma_zz = -p, penetration p/eps_n with
+    eps_n from the softer body); non-matching meshes converge in equilibrium."""
+    res = ok(S.measure(S.scene(sets=S.cells(2, 2) + S.moduli(ratio) + [f"contact.0.formulation={formulation}"])))
+    assert res["stress_error"] <= 1e-8
+    assert abs(S.penetration_ratio(res) - 1.0) <= 1e-6
+    res = ok(S.measure(S.scene(sets=S.cells(2, 3) + S.moduli(ratio) + [f"contact.0.formulation={formulation}"])))
+    assert S.force_error(res) <= 1e-8
+
+
+@pytest.mark.parametrize("formulation", FORMULATIONS)
+@pytest.mark.parametrize("nu", S.NUS)
+def test_poissons_ratio(nu, formulation):
+    """Poisson's ratio up to 0.499, on both blocks or on the upper one only (the interface then slides): the
+    uniaxial answer stays exact on matching meshes, non-matching meshes converge in equilibrium."""
+    for nu_lower in (nu, 0.0):
+        mats = [f"bodies.0.material.poissons_ratio={nu_lower}", f"bodies.1.material.poissons_ratio={nu}",
+                f"contact.0.formulation={formulation}"]
+        res = ok(S.measure(S.scene(sets=S.cells(2, 2) + mats)))
+        assert res["stress_error"] <= 1e-8
+        res = ok(S.measure(S.scene(sets=S.cells(2, 3) + mats)))
+        assert S.force_error(res) <= 1e-8
+
+
+# ---------------------------------------------------------------- length units
+
+@pytest.mark.parametrize("case", FORMULATIONS + ["dies"])
+def test_length_units(case):
+    """The same physical scene in units from 1e-6 to 1e3 (every length times s) shall give the same u/s and
+    sigma/p to 1e-8 (non-matching patch test per formulation; two cubes between sticking dies)."""
+    if case == "dies":
+        path, sets = S.CUBES, ["bodies.0.mesh.cells=[2,2,2]", "bodies.1.mesh.cells=[3,3,3]"]
+    else:
+        path, sets = S.PATCH, S.cells(2, 3) + [f"contact.0.formulation={case}"]
+    ref = ok(S.measure(S.scene(path, sets)))
+    for s in S.SCALES:
+        res = ok(S.measure(S.scene(path, sets, edit=S.scaled(s)), length=s))
+        assert S.relative_difference(res["u"], ref["u"]) <= 1e-8
+        assert np.abs(res["stress"] - ref["stress"]).max() <= 1e-8 * np.abs(ref["stress"]).max()
+
+
+# ---------------------------------------------------------------- gaps, penetration, holding
+
+def special(name):
+    cases, sigma_fit = S.special_cases()
+    return next(sc for n, _, sc in cases if n.startswith(name)), sigma_fit
+
+
+def test_gap_closed_by_the_load():
+    """An upper block 0.01 m above the lower one, held only by contact and pushed by p: the gap closes and the
+    answer is the touching one (sigma_zz = -p, penetration p/eps_n)."""
+    res = ok(S.measure(special("gap 0.01 m, upper held only by contact, pressure")[0]))
+    assert res["stress_error"] <= 1e-8
+    assert abs(S.penetration_ratio(res) - 1.0) <= 1e-6
+
+
+def test_gap_that_stays_open():
+    """A gap that the held upper block does not close: no contact force, no stress, the block translated."""
+    res = ok(S.measure(special("gap 0.01 m, upper held by uz")[0]))
+    assert res["pair"]["active_rows"] == 0 and res["pair"]["total_normal_force"] == 0.0
+    assert np.abs(res["stress"]).max() <= 1e-9
+    assert res["pair"]["max_penetration_slave"] == pytest.approx(-0.005, rel=1e-9)
+
+
+@pytest.mark.parametrize("name", ["gap 0.01 m, upper held only by contact, pulled", "touching, upper held only"])
+def test_body_pulled_off_its_only_support(name):
+    """A body held only by contact and pulled away has no equilibrium: a ConvergenceError naming the body and
+    the motion nothing holds, never a converged answer."""
+    res = S.measure(special(name)[0])
+    assert res["status"] == "ConvergenceError"
+    assert "upper (translation z)" in res["message"]
+
+
+def test_initial_penetration_pushed_out():
+    """An upper block overlapping the lower by 0.01 m and held only by contact is pushed out to the touching
+    answer: sigma_zz = -p, penetration p/eps_n, moved up by the overlap less the compression."""
+    res = ok(S.measure(special("initial penetration 0.01 m, upper held only")[0]))
+    assert res["stress_error"] <= 1e-8
+    assert abs(S.penetration_ratio(res) - 1.0) <= 1e-6
+    # the upper block's bottom moves most: up by the overlap, less the lower block's shortening p L / E
+    # (L = 0.5 m) and the penetration p / eps_n
+    assert res["u"][:, 2].max() == pytest.approx(0.01 - 0.5e-3 - 1.0 / res["pair"]["eps_n"], rel=1e-8)
+
+
+def test_initial_penetration_between_clamps():
+    """Both blocks clamped with a 0.01 m overlap: the penalty spring and the blocks share it,
+    sigma_zz = -d / (L/E + 1/eps_n) in every cell (to 1e-8)."""
+    sc, sigma_fit = special("initial penetration 0.01 m, both blocks clamped")
+    res = ok(S.measure(sc))
+    assert np.abs(res["stress"][:, 2] + sigma_fit).max() <= 1e-8 * sigma_fit
+
+
+def test_body_not_held_tangentially_is_an_input_error():
+    """An upper block with only a pressure and frictionless contact is free in x, y and rotation about z: a
+    SceneError names the body and those motions before any solve (a direct solver would return round-off)."""
+    res = S.measure(special("upper with no displacement boundary")[0])
+    assert res["status"] == "SceneError"
+    assert "upper (translation x, translation y, rotation about z)" in res["message"]
+
+
+def test_block_held_only_by_a_die():
+    """A block with no displacement boundary on a sticking die is held by it (sigma_zz = -p, die force pA); on a
+    frictionless die it is free in x, y and rotation about z: a SceneError."""
+    res = ok(S.measure(special("one block on a sticking die")[0]))
+    assert res["stress_error"] <= 1e-8
+    assert next(iter(res["dies"].values()))["force_on_bodies"][2] == pytest.approx(1.0, rel=1e-8)
+    res = S.measure(special("one block on a frictionless die")[0])
+    assert res["status"] == "SceneError" and "lower (translation x, translation y, rotation about z)" in res["message"]
+
+
+@pytest.mark.parametrize("formulation", FORMULATIONS)
+@pytest.mark.parametrize("element, lower, upper", S.TIE_CASES)
+def test_nodes_on_edges_and_vertices(element, lower, upper, formulation):
+    """Slave nodes exactly on master vertices and edges (and master nodes on slave edges): the run converges,
+    a finer nested slave is exact for master_slave, and the answer is continuous: moving the upper block by
+    +-1e-12 m in x and y changes the displacements by less than 1e-8 relative."""
+    ref = ok(S.measure(S.scene(sets=S.tie_sets(element, lower, upper, formulation))))
+    assert S.force_error(ref) <= 1e-8
+    if formulation == "master_slave" and upper > lower:
+        assert ref["stress_error"] <= 1e-8
+    for shift in (1e-12, -1e-12):
+        res = ok(S.measure(S.scene(sets=S.tie_sets(element, lower, upper, formulation, shift))))
+        assert S.relative_difference(res["u"], ref["u"]) <= 1e-8
+
+
+# ---------------------------------------------------------------- the restraint kernel
+
+def test_rigid_velocities_are_rigid():
+    """The six motions are unit translations and unit-rate rotations scaled by 1/length about the centre."""
+    x = np.array([[1.0, 2.0, 3.0], [0.0, 0.0, 0.0]])
+    v = rigid_velocities(x, centre=[1.0, 2.0, 3.0], length=2.0)
+    assert np.array_equal(v[:, :, :3], np.broadcast_to(np.eye(3), (2, 3, 3)))
+    assert np.allclose(v[0, :, 3:], 0.0)                                 # the centre does not move in rotation
+    assert np.allclose(v[1, :, 5], np.cross([0, 0, 1], [-0.5, -1.0, -1.5]))
+
+
+def test_free_motions_names_the_null_space():
+    """A Gram matrix holding body a fully and body b in all but translation z and rotation about x reports
+    exactly b's two free motions; a fully held one reports none; a body held only relative to another
+    reports both bodies."""
+    names = ["a", "b"]
+    held = np.eye(12)
+    assert free_motions(held, names) == {}
+    g = held.copy()
+    g[8, 8] = g[9, 9] = 0.0                       # b: translation z, rotation about x
+    assert free_motions(g, names) == {"b": [MODES[2], MODES[3]]}
+    rel = np.eye(12)
+    rel[[2, 8], :] = rel[:, [2, 8]] = 0.0
+    rel[np.ix_([2, 8], [2, 8])] = [[1.0, -1.0], [-1.0, 1.0]]          # only u_z(a) - u_z(b) is held
+    assert free_motions(rel, names) == {"a": [MODES[2]], "b": [MODES[2]]}
+
+
+def test_bilateral_start_pulls_open_rows_closed():
+    """In the first iteration of an increment (bilateral) a row with a gap is active with a negative (pulling)
+    force eps_n c / W, so the first Newton step solves the glued problem; otherwise an open row has no force."""
+    c, W = np.array([-2e-3, 1e-3]), np.array([0.5, 0.25])
+    _, m, d, active = row_response(c, W, 1e6, 1.0, np.inf, bilateral=True)
+    assert active.all() and np.allclose(m, 1e6 * c / W) and np.allclose(d, 1e6 / W)
+    _, m, _, active = row_response(c, W, 1e6, 1.0, np.inf)
+    assert active.all() and m[0] == 0.0 and m[1] == pytest.approx(1e6 * c[1] / W[1])
