@@ -155,11 +155,21 @@ def strain_energy(cell_type, xe, ue, lmbda, mu):
     return 0.5 * np.einsum("mqi,mqi,mq,q->m", eps[..., 0], sigma[..., 0], detJ, w)
 
 
-def cell_stress(cell_type, xe, ue, lmbda, mu):
-    """Cauchy stress (m, 6), Voigt order, at each cell's reference centroid."""
-    B, _ = strain_displacement(cell_type, xe, fem.CENTROID[cell_type])
-    eps = B[:, 0] @ np.asarray(ue, float)[..., None]               # (m, 6, 1)
-    return (elasticity_matrix(lmbda, mu) @ eps)[..., 0]
+def cell_stress(cell_type, xe, ue, lmbda, mu, chunk=16384):
+    """Cauchy stress (m, 6), Voigt order, at each cell's reference centroid.
+
+    Cells go through in chunks: B alone is 1.2 kB per hex, so a million-dof box would otherwise
+    hold ~0.2 GB of temporaries per rank at output time."""
+    xe, ue = np.asarray(xe, float), np.asarray(ue, float)
+    m = len(xe)
+    lmbda, mu = (np.broadcast_to(np.asarray(p, float), (m,)) for p in (lmbda, mu))
+    out = np.empty((m, 6))
+    for s in range(0, m, chunk):
+        c = slice(s, s + chunk)
+        B, _ = strain_displacement(cell_type, xe[c], fem.CENTROID[cell_type])
+        eps = B[:, 0] @ ue[c][..., None]                             # (k, 6, 1)
+        out[c] = (elasticity_matrix(lmbda[c], mu[c]) @ eps)[..., 0]
+    return out
 
 
 def von_mises(stress):
