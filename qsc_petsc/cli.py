@@ -23,6 +23,8 @@ def build_parser():
                        help="override a scene value, e.g. bodies.0.mesh.cells=[8,8,8] (repeatable)")
         if name == "run":
             s.add_argument("--out", help="output folder (default: the scene's output.directory)")
+    sub.add_parser("sweep", add_help=False, help="run a scene over a grid of variations, each run compared with a "
+                   "reference run (qsc sweep --help)")
     return p
 
 
@@ -38,7 +40,11 @@ def versions():
 
 
 def main(argv=None):
-    own, petsc_args = split_petsc_args(sys.argv[1:] if argv is None else argv)
+    argv = sys.argv[1:] if argv is None else argv
+    if argv[:1] == ["sweep"]:          # runs are subprocesses: the sweep itself never starts PETSc or MPI
+        from .sweep import main as sweep_main
+        return sweep_main(argv[1:])
+    own, petsc_args = split_petsc_args(argv)
     args = build_parser().parse_args(own)
     init_petsc(petsc_args)
     from mpi4py import MPI

@@ -1,0 +1,124 @@
+"""qsc sweep: argument checks before any run, the three output files, failed runs recorded while the sweep goes on.
+
+The sweeps start real `qsc run` subprocesses (through mpirun) on a tiny patch test (150 dofs), so
+these tests run only in the serial suite.
+"""
+
+import csv
+import os
+import shutil
+
+import pytest
+from conftest import CONFIGS
+from mpi4py import MPI
+
+from qsc_petsc import cli
+from qsc_petsc.sweep import SweepInputError, pareto_front, parse_variation, split_values
+
+pytestmark = pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="starts MPI jobs itself: serial suite only")
+
+SCENE = str(CONFIGS / "patch_test.toml")
+TINY = ["--set", "bodies.0.mesh.cells=[2,2,1]", "--set", "bodies.1.mesh.cells=[3,3,1]"]
+
+
+@pytest.fixture
+def mpi_env(monkeypatch):
+    monkeypatch.setenv("OMPI_ALLOW_RUN_AS_ROOT", "1")
+    monkeypatch.setenv("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
+    monkeypatch.setenv("OMP_NUM_THREADS", "1")
+
+
+def read_csv(path):
+    with open(path, newline="") as f:
+        return list(csv.DictReader(f))
+
+
+def test_values_split_outside_brackets():
+    assert split_values("[2,2,1],[4,4,2]") == ["[2,2,1]", "[4,4,2]"]
+    assert split_values('1e2, 1e4,"a,b"') == ["1e2", "1e4", '"a,b"']
+    v = parse_variation("-qsc_pc_type=gamg,hypre,lu", "--vary", "ranks")
+    assert (v.kind, v.values) == ("petsc", ["gamg", "hypre", "lu"])
+    assert parse_variation("ranks=1,2", "--vary", "ranks").kind == "ranks"
+    for bad in ("contact.0.penalty", "=1,2", "ranks=0,2", "contact.0.penalty=1e2,,1e4", "-qsc pc=1,2", "a=1,1"):
+        with pytest.raises(SweepInputError):
+            parse_variation(bad, "--vary", "ranks")
+
+
+def test_pareto_front():
+    pts = [(1.0, 1.0), (2.0, 0.5), (2.0, 2.0), (3.0, 0.5), (0.5, 3.0), (1.0, 1.0)]
+    # (2, 2) is dominated by (1, 1); (3, 0.5) by (2, 0.5); the two equal points dominate neither each other
+    assert pareto_front(pts) == [0, 1, 4, 5]
+
+
+@pytest.mark.parametrize("args, names", [
+    (["--vary", "contact.0.formulaton=master_slave,two_pass"], "contact.0.formulaton"),
+    (["--vary", "contact.0.formulation=master_slave,bogus"], "bogus"),
+    (["--vary", "contact.0.penalty"], "contact.0.penalty"),
+    (["--vary", "contact.0.penalty=1e2", "--vary", "contact.0.penalty=1e4"], "varied twice"),
+    (["--vary", "contact.0.penalty=1e2", "--reference", "bodies.7.mesh.cells=[2,2,2]"], "bodies[7]"),
+    (["--vary", "petsc.pc_type=lu", "-qsc_pc_type", "lu", "--vary", "-qsc_pc_type=gamg,lu"], "-qsc_pc_type"),
+])
+def test_bad_arguments_exit_2_before_any_run(tmp_path, capsys, args, names):
+    out = tmp_path / "sweep"
+    assert cli.main(["sweep", SCENE, "--out", str(out)] + TINY + args) == 2
+    text = capsys.readouterr().out
+    assert len(text.strip().splitlines()) == 1 and names in text, text
+    assert not out.exists()
+
+
+@pytest.mark.skipif(shutil.which("mpirun") is None, reason="mpirun not found")
+def test_sweep_writes_csv_table_and_plot(tmp_path, capsys, mpi_env):
+    out = tmp_path / "sweep"
+    code = cli.main(["sweep", SCENE, *TINY, "--vary", "contact.0.formulation=master_slave,two_pass",
+                     "--vary", "contact.0.penalty=1e2,1e4", "--reference", "contact.0.formulation=two_pass",
+                     "--out", str(out)])
+    assert code == 0
+    progress = [ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("[")]
+    assert len(progress) == 5 and all(": ok in " in ln for ln in progress)
+    rows = read_csv(out / "sweep.csv")
+    assert [r["run"] for r in rows] == ["reference", "run_001", "run_002", "run_003", "run_004"]
+    combos = [(r["contact.0.formulation"], r["contact.0.penalty"]) for r in rows]
+    assert combos == [("two_pass", "1e2"), ("master_slave", "1e2"), ("master_slave", "1e4"),
+                      ("two_pass", "1e2"), ("two_pass", "1e4")]
+    assert all(r["status"] == "ok" and r["dofs"] == "150" and int(r["newton_iterations"]) >= 1 for r in rows)
+    assert rows[3]["folder"] == rows[0]["folder"]              # the reference's own combination is not run twice
+    assert float(rows[0]["displacement_l2"]) == 0.0 == float(rows[3]["displacement_l2"])
+    for r in (rows[1], rows[2], rows[4]):
+        assert 0.0 < float(r["displacement_l2"]) < 1.0
+        assert float(r["energy"]) > 0 and float(r["max_penetration"]) > 0 and r["traction"]
+        assert float(r["force"]) < 1e-6                          # every formulation carries the 1 N load
+        assert float(r["time_solve_s"]) > 0 and float(r["peak_memory_total_mib"]) > 0
+    assert sum(r["pareto"] == "yes" for r in rows) >= 1
+    table = (out / "sweep.md").read_text().splitlines()
+    assert sum(ln.startswith(("| run_", "| reference")) for ln in table) == 5
+    assert (out / "pareto.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.mark.skipif(shutil.which("mpirun") is None, reason="mpirun not found")
+def test_failed_and_unconverged_runs_are_recorded(tmp_path, capsys, mpi_env):
+    """One CG iteration cannot converge, a malformed option value crashes its run: both recorded, the sweep goes on."""
+    out = tmp_path / "sweep"
+    code = cli.main(["sweep", SCENE, *TINY, "--set", "petsc.ksp_type=cg", "--set", "petsc.pc_type=jacobi",
+                     "--set", "solver.max_cutbacks=0", "--vary", "-qsc_ksp_max_it=1000,1,many", "--out", str(out)])
+    assert code == 0
+    rows = {r["run"]: r for r in read_csv(out / "sweep.csv")}
+    assert rows["reference"]["status"] == "ok"
+    stuck = rows["run_002"]
+    assert (stuck["-qsc_ksp_max_it"], stuck["status"], stuck["exit_code"]) == ("1", "not converged", "3")
+    assert "DIVERGED" in stuck["message"] and stuck["displacement_l2"] == ""
+    crashed = rows["run_003"]
+    assert (crashed["-qsc_ksp_max_it"], crashed["status"]) == ("many", "failed")
+    assert crashed["exit_code"] not in ("0", "3") and "many" in crashed["message"], crashed["message"]
+    assert len([ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("[")]) == 4   # one per run
+
+
+@pytest.mark.skipif(shutil.which("mpirun") is None, reason="mpirun not found")
+def test_failed_reference_exits_3(tmp_path, capsys, mpi_env):
+    out = tmp_path / "sweep"
+    code = cli.main(["sweep", SCENE, *TINY, "--vary", "-qsc_pc_type=nonexistent,lu", "--out", str(out)])
+    assert code == 3
+    rows = read_csv(out / "sweep.csv")
+    assert [r["status"] for r in rows] == ["failed", "failed", "ok"]
+    assert rows[2]["displacement_l2"] == ""                          # nothing to compare with
+    assert "reference run did not succeed" in capsys.readouterr().out
+    assert os.path.isfile(out / "sweep.md") and os.path.isfile(out / "pareto.png")
