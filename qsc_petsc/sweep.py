@@ -372,7 +372,7 @@ def csv_rows(plan, rows):
     phases += sorted({p for r in rows for p in r["time"]} - set(phases))
     tags = _interaction_tags(rows)
     keys = [v.key for v in plan.variations] + [v.key for v in plan.reference_only]
-    header = (["run", "folder"] + keys + ["status", "exit_code", "message", "ranks", "dofs", "steps",
+    header = (["run", "folder"] + keys + ["status", "exit_code", "message", "mpi_ranks", "dofs", "steps",
                                           "newton_iterations", "krylov_iterations", "cutbacks", "wall_time_s",
                                           "run_time_s"]
               + [f"time_{p}_s" for p in phases] + ["peak_memory_total_mib", "peak_memory_max_rank_mib"]

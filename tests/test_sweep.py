@@ -122,3 +122,13 @@ def test_failed_reference_exits_3(tmp_path, capsys, mpi_env):
     assert rows[2]["displacement_l2"] == ""                          # nothing to compare with
     assert "reference run did not succeed" in capsys.readouterr().out
     assert os.path.isfile(out / "sweep.md") and os.path.isfile(out / "pareto.png")
+
+
+@pytest.mark.skipif(shutil.which("mpirun") is None, reason="mpirun not found")
+def test_ranks_key_sets_the_rank_count(tmp_path, capsys, mpi_env):
+    """ranks=1,2: the run on 2 ranks says so in its summary and gives the 1-rank answer."""
+    out = tmp_path / "sweep"
+    assert cli.main(["sweep", SCENE, *TINY, "--vary", "ranks=1,2", "--out", str(out)]) == 0
+    rows = read_csv(out / "sweep.csv")
+    assert [(r["ranks"], r["mpi_ranks"]) for r in rows] == [("1", "1"), ("1", "1"), ("2", "2")]
+    assert float(rows[2]["displacement_l2"]) < 1e-10 and float(rows[2]["traction"]) < 1e-8
