@@ -17,6 +17,10 @@ SNES_REASONS = {v: k for k, v in vars(PETSc.SNES.ConvergedReason).items() if not
 KSP_REASONS = {v: k for k, v in vars(PETSc.KSP.ConvergedReason).items() if not k.startswith("_")}
 SUBSET = PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN
 PETSC_ERR_NOT_CONVERGED = 91   # raised instead of a reason under -qsc_ksp/snes_error_if_not_converged
+# MUMPS INFOG(1) when one of its work arrays was too small (numerical pivoting delayed more pivots than the
+# analysis foresaw): more memory relaxation ICNTL(14) cures it; measured on a 1.7k-dof patch test on 3 ranks
+MUMPS_WORKSPACE_ERRORS = (-8, -9, -14, -15, -17, -20)
+MUMPS_MAX_RELAXATION = 1000    # percent
 
 
 class ConstraintTerm:
@@ -103,6 +107,8 @@ class System:
         # (restraint.Restraint); a solve never converges to an active set that leaves a body free
         self.free_motions = None
         self.free_now = self.free_seen = ""
+        self.own_options = set()       # options this system set (removed by destroy)
+        self.mumps_relaxation = None   # MUMPS ICNTL(14) [%] once raised after a workspace failure
 
         self.snes = PETSc.SNES().create(comm=comm)
         self.snes.setOptionsPrefix("qsc_")
@@ -214,13 +220,19 @@ class System:
         for term in self.terms:
             # every row within reach starts closed (formulation.md section 4, zero-gap start; see ConstraintTerm)
             term.start = True
-        u = u0.copy()
-        u.getArray()[self.bc_local] = t * self.ubar.getArray()[self.bc_local]
-        try:
-            self.snes.solve(None, u)
-        except PETSc.Error as exc:     # on every rank: the reason is collective; a failed solve like any other
-            if exc.ierr != PETSC_ERR_NOT_CONVERGED:
-                raise
+        while True:
+            u = u0.copy()
+            u.getArray()[self.bc_local] = t * self.ubar.getArray()[self.bc_local]
+            try:
+                self.snes.solve(None, u)
+            except PETSc.Error as exc:     # on every rank: the reason is collective; a failed solve like any other
+                if exc.ierr != PETSC_ERR_NOT_CONVERGED:
+                    raise
+            if self.snes.getConvergedReason() > 0 or not self._more_mumps_workspace():
+                break
+            u.destroy()
+            for term in self.terms:
+                term.start = True
         # held dofs stay at their values up to the Krylov tolerance: put them back exactly
         u.getArray()[self.bc_local] = t * self.ubar.getArray()[self.bc_local]
         reason = self.snes.getConvergedReason()
@@ -236,9 +248,33 @@ class System:
         }
         if reason <= 0 and self.free_seen:
             stats["free_motion"] = self.free_seen
+        if self.mumps_relaxation is not None:
+            stats["mumps_icntl_14"] = self.mumps_relaxation
         return reason > 0, u, stats
 
+    def _more_mumps_workspace(self):
+        """After a MUMPS factorization that ran out of workspace, double its memory relaxation ICNTL(14) for the
+        next factors (collective: INFOG is global); False if that was not the failure or it is spent."""
+        pc = self.snes.getKSP().getPC()
+        if pc.getType() not in ("lu", "cholesky") or pc.getFactorSolverType() != "mumps":
+            return False
+        F = pc.getFactorMatrix()
+        relax = 2 * max(F.getMumpsIcntl(14), 20)
+        if F.getMumpsInfog(1) not in MUMPS_WORKSPACE_ERRORS or relax > MUMPS_MAX_RELAXATION:
+            return False
+        name = "qsc_mat_mumps_icntl_14"      # read when a factor is made; the user's own value stands
+        opts = PETSc.Options()
+        if opts.hasName(name) and name not in self.own_options:
+            return False
+        opts.setValue(name, relax)
+        self.own_options.add(name)
+        self.mumps_relaxation = relax
+        pc.reset()        # PETSc skips the numeric factorization of a failed MUMPS factor: make a new one
+        return True
+
     def destroy(self):
+        for name in self.own_options:
+            PETSc.Options().delValue(name)
         self.snes.destroy()
         if self.J is not self.K:
             self.J.destroy()
