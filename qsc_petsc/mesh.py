@@ -118,6 +118,9 @@ def build_global_mesh(scene):
         spec = body.mesh
         if spec.type == "box":
             bm = box_mesh(spec.origin, spec.size, spec.cells, spec.element)
+        elif spec.type == "hertz":
+            from .hertz import mesh_file
+            bm = read_mesh_file(str(mesh_file(spec.part, spec.level, spec.radius, spec.cache)))
         else:
             bm = read_mesh_file(spec.path, spec.scale)
         cell_types.add(bm.cell_type)

@@ -397,7 +397,8 @@ class Options(Field):
 
 BODY = Table({
     "name": Str("Unique body name, used in \"body.surface\" references.", pattern=BODY_NAME),
-    "mesh": Variant("type", "How the body is meshed: a generated box, or a mesh file.", common={}, variants={
+    "mesh": Variant("type", "How the body is meshed: a generated box, a mesh file, or a part of the "
+                             "Hertz benchmark generated with gmsh.", common={}, variants={
         "box": {
             "origin": Vec3(Float(), "Corner of the box with the smallest coordinates.", default=[0, 0, 0], unit="m"),
             "size": Vec3(Float(gt=0), "Edge lengths of the box along x, y, z.", unit="m"),
@@ -407,6 +408,17 @@ BODY = Table({
         "file": {
             "path": Str("Mesh file, relative to the scene file's folder; its physical groups name the surfaces."),
             "scale": Float("Factor multiplying the file's coordinates.", gt=0, default=1.0),
+        },
+        "hertz": {
+            "part": Choice(("sphere", "block"), "Part of the Hertz benchmark (qsc_petsc/hertz.py): the quarter "
+                           "sphere (surfaces xmin ymin top contact outer) or the quarter block (xmin ymin zmin "
+                           "xmax ymax contact top)."),
+            "level": Choice(("coarse", "medium", "fine"), "Element size at the contact: 1/4, 1/8 or 1/16 of "
+                            "a = 0.1 R on the sphere, 1.4x that on the block.", default="coarse"),
+            "radius": Float("Sphere radius R; every dimension of both parts scales with it.", gt=0, default=1.0,
+                            unit="m"),
+            "cache": Str("Folder of the generated .msh files, made with gmsh when missing; relative to the "
+                         "working directory.", default="build/meshes"),
         },
     }, doc="The body's mesh."),
     "material": Table({
@@ -664,6 +676,8 @@ def _cross_check(scene: dict, source_dir: Path) -> None:
             mesh["path"] = os.path.abspath(source_dir / mesh["path"])
             if not os.path.isfile(mesh["path"]):
                 raise SceneError(f"bodies[{i}].mesh.path: file not found: {mesh['path']}")
+        elif mesh["type"] == "hertz":
+            mesh["cache"] = os.path.abspath(mesh["cache"])
     for i, bc in enumerate(scene["boundary"]):
         _check_ref(bc["surface"], f"boundary[{i}].surface", bodies)
         if bc["type"] == "displacement" and all(bc[k] is None for k in ("ux", "uy", "uz")):

@@ -14,13 +14,16 @@ SCENES = sorted(CONFIGS.glob("*.toml"))
 
 
 def coarse(path):
-    """--set overrides halving the cells of every generated box (at least one cell per direction).
+    """--set overrides halving the cells of every generated box (at least one cell per direction), and
+    the coarse level for every Hertz part.
 
     Halving keeps what a scene is about (non-matching interfaces stay non-matching) at an eighth
     of the cells, so that every scene added to configs/ is tested without a hand-made override."""
     data = tomllib.loads(path.read_text())
+    bodies = list(enumerate(data.get("bodies", [])))
     return [f"bodies.{i}.mesh.cells=[{','.join(str(max(1, n // 2)) for n in body['mesh']['cells'])}]"
-            for i, body in enumerate(data.get("bodies", [])) if body.get("mesh", {}).get("type") == "box"]
+            for i, body in bodies if body.get("mesh", {}).get("type") == "box"] + [
+            f"bodies.{i}.mesh.level=coarse" for i, body in bodies if body.get("mesh", {}).get("type") == "hertz"]
 
 
 def test_configs_folder_has_scenes():

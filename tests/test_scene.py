@@ -188,7 +188,7 @@ CASES = [
     (_set(["bodies", 0, "mesh", "cells"], 4), "bodies[0].mesh.cells: expected a list of 3 integers, got 4"),
     # mesh variants
     (_delete(["bodies", 0, "mesh", "type"]), "bodies[0].mesh.type: required key missing"),
-    (_set(["bodies", 0, "mesh", "type"], "sphere"), 'bodies[0].mesh.type: must be one of "box", "file", got "sphere"'),
+    (_set(["bodies", 0, "mesh", "type"], "sphere"), 'bodies[0].mesh.type: must be one of "box", "file", "hertz", got "sphere"'),
     (_set(["bodies", 0, "mesh", "path"], "a.msh"), 'bodies[0].mesh.path: only for type = "file"'),
     (_set(["bodies", 0, "mesh"], {"type": "file", "path": "a.msh", "cells": [1, 1, 1]}),
      'bodies[0].mesh.cells: only for type = "box"'),

@@ -1,0 +1,205 @@
+#!/usr/bin/env python3
+"""Hertz contact (issue 4, part 4): a sphere on a block at 3 refinements, every formulation and slave choice.
+
+Runs configs/hertz_{coarse,medium,fine}.toml (quarter model, gmsh tets, non-matching contact meshes)
+with master_slave, two_pass and quasi_symmetric (nodal integration, as the scenes), two_pass and
+quasi_symmetric with 3 x 3 Gauss points per face, the sphere or the block as slave, and compares the
+contact pressure and radius with Hertz's solution at the force each run measured: F = 4 x the pair's
+total_normal_force (quarter model), E* from both bodies, a = (3 F R / 4 E*)^(1/3), p0 = 3 F / (2 pi a^2).
+On each contact surface (sphere, block), from the last step's nodal contact_traction:
+  * max t: the largest nodal traction (the raw peak);
+  * fit p(0): c0 of a least-squares fit t = c0 + c2 r^2 over the nodes with r < a/2 (the peak with
+    the node-to-node scatter filtered);
+  * a: the radius where the traction drops to zero, qsc_petsc.hertz.loaded_radius (the circle that
+    best separates nodes with t > 1 % of max t from the others), and (a - a_H) / h with h the mean
+    size of that surface's faces within r < a_H.
+Writes docs/hertz.csv, docs/hertz.png (traction against radius, finest level) and the table into
+docs/verification.md. Runs go to build/hertz/. Usage:
+  .venv/bin/python scripts/hertz.py [--levels coarse medium fine] [--ranks 1 1 2]   (about 30 minutes)
+"""
+
+import argparse
+import csv
+import json
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "scripts"))
+sys.path.insert(0, str(ROOT))
+from benchlib import ENV, QSC, add_docs_args, write_table
+
+from qsc_petsc import fem, hertz
+from qsc_petsc.mesh import build_global_mesh
+from qsc_petsc.scene import load_scene
+
+LEVELS = ("coarse", "medium", "fine")
+FORMULATIONS = ("master_slave", "two_pass", "quasi_symmetric")
+# (formulation, integration): every formulation with the scenes' nodal (node-to-segment) rows, and the
+# two symmetric ones with 3 x 3 Gauss points per face (formulation.md section 8)
+CASES = [(f, "nodal") for f in FORMULATIONS] + [("two_pass", "gauss"), ("quasi_symmetric", "gauss")]
+SLAVES = {"sphere": ("sphere.contact", "block.contact"), "block": ("block.contact", "sphere.contact")}
+SURFACES = ("sphere", "block")
+RUNS = ROOT / "build" / "hertz"
+COLUMNS = ["level", "formulation", "integration", "slave", "dofs", "newton", "wall_s", "force", "a_hertz", "p0_hertz"] + [
+    f"{m}_{s}" for s in SURFACES for m in ("max_t", "fit_p0", "a", "h")]
+
+
+def overrides(formulation, integration, slave):
+    s, m = SLAVES[slave]
+    return [f"contact.0.formulation={formulation}", f"contact.0.integration={integration}",
+            f"contact.0.slave={s}", f"contact.0.master={m}"]
+
+
+def run_case(level, formulation, integration, slave, ranks, petsc=()):
+    """One qsc run under mpirun; returns its output folder."""
+    out = RUNS / f"{level}_{formulation}_{integration}_{slave}"
+    sets = [a for o in overrides(formulation, integration, slave) for a in ("--set", o)]
+    cmd = ["mpirun", "--oversubscribe", "-n", str(ranks), str(QSC), "run", str(ROOT / "configs" / f"hertz_{level}.toml"),
+           "--out", str(out), *sets, *petsc]
+    proc = subprocess.run(cmd, env=ENV, cwd=ROOT, capture_output=True, text=True, check=False)
+    if proc.returncode != 0:
+        sys.stderr.write(proc.stdout + proc.stderr)
+        raise RuntimeError(f"run failed ({proc.returncode}): {' '.join(cmd)}")
+    return out
+
+
+def surface_vertices(gm, name):
+    """Original vertex ids and faces (k, 3) of a named surface of the global mesh."""
+    bit = gm.surface_names.index(name)
+    c, f = np.nonzero(gm.face_mask & (np.int64(1) << np.int64(bit)))
+    faces = fem.cell_faces(gm.cell_type, gm.cells[c], f)
+    return np.unique(faces), faces
+
+
+def measure(scene, points, traction, total_normal_force):
+    """Hertz's values at the measured force and, per contact surface, the measures of the module docstring."""
+    E = {b.name: b.material for b in scene.bodies}
+    E_star = hertz.effective_modulus(E["sphere"].youngs_modulus, E["sphere"].poissons_ratio,
+                                     E["block"].youngs_modulus, E["block"].poissons_ratio)
+    R = scene.body("sphere").mesh.radius
+    F = 4.0 * total_normal_force                       # quarter model
+    a_H = hertz.contact_radius(F, R, E_star)
+    p0 = hertz.peak_pressure(F, a_H)
+    gm = build_global_mesh(scene)
+    row = {"force": F, "a_hertz": a_H, "p0_hertz": p0}
+    profiles = {}
+    for surface in SURFACES:
+        v, faces = surface_vertices(gm, f"{surface}.contact")
+        r = np.hypot(points[v, 0], points[v, 1])
+        t = traction[v]
+        a, _ = hertz.loaded_radius(r, t)
+        centre = np.hypot(*gm.points[faces].mean(axis=1)[:, :2].T)
+        h = fem.face_size(gm.points[faces])[centre < a_H].mean()
+        row.update({f"max_t_{surface}": t.max(), f"fit_p0_{surface}": hertz.centre_fit(r, t, 0.5 * a_H),
+                    f"a_{surface}": a, f"h_{surface}": h})
+        profiles[surface] = (r, t)
+    return row, profiles
+
+
+def analyse(level, formulation, integration, slave, out):
+    import h5py
+    scene = load_scene(ROOT / "configs" / f"hertz_{level}.toml", overrides(formulation, integration, slave))
+    summary = json.loads((out / "summary.json").read_text())
+    if summary["status"] != "ok":
+        raise RuntimeError(f"{out}: status {summary['status']}")
+    pair = next(iter(summary["steps"][-1]["contact"].values()))
+    with h5py.File(out / "solution.h5", "r") as h5:
+        points = h5["mesh/geometry"][:]
+        traction = h5[f"step_{len(summary['steps']):04d}/contact_traction"][:, 0]
+    row, profiles = measure(scene, points, traction, pair["total_normal_force"])
+    row.update({"level": level, "formulation": formulation, "integration": integration, "slave": slave,
+                "dofs": summary["mesh"]["dofs"],
+                "newton": sum(s["snes_iterations"] for s in summary["steps"]),
+                "wall_s": sum(summary["time"].values())})
+    return row, profiles
+
+
+def plot(rows, profiles, level, path):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, axes = plt.subplots(2, len(CASES), figsize=(4 * len(CASES), 7), sharex=True, sharey=True)
+    x = np.linspace(0, 1.3, 400)
+    for i, slave in enumerate(SLAVES):
+        for j, (formulation, integration) in enumerate(CASES):
+            ax = axes[i, j]
+            key = (level, formulation, integration, slave)
+            row = next(r for r in rows if (r["level"], r["formulation"], r["integration"], r["slave"]) == key)
+            a, p0 = row["a_hertz"], row["p0_hertz"]
+            for surface, marker in zip(SURFACES, ("o", "^")):
+                r, t = profiles[key][surface]
+                ax.plot(r / a, t / p0, marker, ms=2.5, alpha=0.6, label=f"{surface} nodes")
+            ax.plot(x, hertz.pressure(x, 1.0, 1.0), "k-", lw=1.5, label="Hertz")
+            ax.set_title(f"{formulation} ({integration}), {slave} slave", fontsize=10)
+            ax.grid(alpha=0.3)
+            if i == 1:
+                ax.set_xlabel("r / a (Hertz, measured force)")
+            if j == 0:
+                ax.set_ylabel("nodal contact traction / p0")
+    axes[0, 0].legend(fontsize=8)
+    axes[0, 0].set_xlim(0, 1.3)
+    fig.suptitle(f"Hertz contact, {level} mesh: force-based nodal traction on both contact surfaces", fontsize=11)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--levels", nargs="+", default=list(LEVELS), choices=LEVELS)
+    ap.add_argument("--ranks", nargs="+", type=int, default=[1, 1, 2], help="MPI ranks per level")
+    ap.add_argument("--reuse", action="store_true", help="analyse the runs already in build/hertz, no solve")
+    add_docs_args(ap, "Hertz contact")
+    args = ap.parse_args()
+    if len(args.ranks) != len(args.levels):
+        ap.error("--ranks needs one count per level")
+    rows, profiles = [], {}
+    for level, ranks in zip(args.levels, args.ranks):
+        for formulation, integration in CASES:
+            for slave in SLAVES:
+                t0 = time.perf_counter()
+                out = RUNS / f"{level}_{formulation}_{integration}_{slave}"
+                if not args.reuse:
+                    out = run_case(level, formulation, integration, slave, ranks, args.petsc.split())
+                row, prof = analyse(level, formulation, integration, slave, out)
+                row["ranks"] = ranks
+                rows.append(row)
+                profiles[(level, formulation, integration, slave)] = prof
+                print(f"{level} {formulation} {integration} {slave}: max t/p0 {row['max_t_sphere'] / row['p0_hertz']:.3f} / "
+                      f"{row['max_t_block'] / row['p0_hertz']:.3f}, fit {row['fit_p0_sphere'] / row['p0_hertz']:.3f}"
+                      f" / {row['fit_p0_block'] / row['p0_hertz']:.3f}, a/a_H {row['a_sphere'] / row['a_hertz']:.3f}"
+                      f" / {row['a_block'] / row['a_hertz']:.3f} ({time.perf_counter() - t0:.0f} s)", flush=True)
+    docs = ROOT / "docs"
+    with open(docs / "hertz.csv", "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=COLUMNS + ["ranks"])
+        w.writeheader()
+        w.writerows(rows)
+    plot(rows, profiles, args.levels[-1], docs / "hertz.png")
+
+    def pair(row, key, scale=None, fmt="{:.3f}"):
+        return " / ".join(fmt.format(row[f"{key}_{s}"] / (scale(row, s) if scale else 1.0)) for s in SURFACES)
+
+    table = []
+    for r in rows:
+        table.append("| " + " | ".join([
+            r["level"], r["formulation"], r["integration"], r["slave"], str(r["dofs"]), f"{r['force']:.4f}", f"{r['a_hertz']:.4f}",
+            f"{r['p0_hertz']:.2f}", pair(r, "max_t", lambda r, s: r["p0_hertz"]),
+            pair(r, "fit_p0", lambda r, s: r["p0_hertz"]), pair(r, "a", lambda r, s: r["a_hertz"]),
+            " / ".join(f"{(r[f'a_{s}'] - r['a_hertz']) / r[f'h_{s}']:+.2f}" for s in SURFACES),
+            pair(r, "h", lambda r, s: r["a_hertz"], "{:.3f}"), str(r["newton"]), f"{r['wall_s']:.1f}"]) + " |")
+    headers = ["level", "formulation", "integration", "slave", "dofs", "F [N]", "a_H [m]", "p0_H [Pa]", "max t / p0",
+               "fit p(0) / p0", "a / a_H", "(a - a_H) / h", "h / a_H", "Newton", "time [s]"]
+    description = ("sphere R = 1 m, E = 2000 Pa, on a block E = 1000 Pa, nu = 0.3, quarter model, alpha = 1e4, "
+                   "MUMPS; ranks per level " + " ".join(map(str, args.ranks)) + ". Hertz "
+                   "values a_H, p0_H at the measured force F (4 x the quarter's); each pair of numbers is "
+                   "sphere surface / block surface; see scripts/hertz.py for the measures. CSV: docs/hertz.csv; "
+                   "figure: docs/hertz.png")
+    write_table(docs / "verification.md", args.title, "hertz.py", description, headers, table)
+
+
+if __name__ == "__main__":
+    main()
