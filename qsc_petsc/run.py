@@ -82,7 +82,8 @@ class Run:
             self.bc_dofs, bc_values, self.bc_per_boundary = assembly.dirichlet_dofs(mesh, scene)
             nullspace = assembly.rigid_body_modes(mesh, u)
             self.system = System(K, self.f_ext, self.bc_dofs, bc_values, nullspace, comm,
-                                 scene.solver.max_active_set_iterations)
+                                 scene.solver.max_active_set_iterations, scene.solver.contact_preconditioner,
+                                 scene.solver.contact_band_layers)
             self.n_constrained = comm.allreduce(len(self.bc_dofs), op=MPI.SUM)
             self.restraint = Restraint(mesh, self.bc_dofs, u)
             self.system.free_motions = lambda terms, active: describe(self.restraint.free(terms, active))

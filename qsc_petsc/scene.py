@@ -497,6 +497,13 @@ SCHEMA = Table({
         "max_active_set_iterations": Int("Most active-set (semi-smooth Newton) iterations per load step.", ge=1,
                                          default=30),
         "active_set_tolerance": Float("Relative closed-set tolerance on the constraint rows.", gt=0, default=1e-12),
+        "contact_preconditioner": Choice(("auto", "band", "none"),
+                                         "Linear solves with contact pairs: \"band\" composes GAMG with an exact "
+                                         "solve on the contact band (options qsc_sub_0_*, qsc_sub_1_*); \"auto\" "
+                                         "does so when the PC is GAMG; \"none\" uses the PETSc options as given.",
+                                         default="auto"),
+        "contact_band_layers": Int("Rings of element neighbours added to the contact rows' dofs in the band.",
+                                   ge=0, le=5, default=1),
     }, "Nonlinear solver controls."),
     "petsc": Options(f"PETSc options without the {OPTIONS_PREFIX!r} prefix, nested tables joined by \"_\"; "
                      "merged over the defaults.", default={"ksp_type": "cg", "pc_type": "gamg", "ksp_rtol": "1e-10"}),

@@ -10,6 +10,7 @@ import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
+from . import preconditioner
 from .contact.penalty import multipliers_update, row_response
 from .errors import ConvergenceError, SceneError
 
@@ -83,8 +84,10 @@ class ConstraintTerm:
 class System:
     """K0 u - t b + sum_terms G^T m with Dirichlet rows u_i - t ubar_i, solved by SNES."""
 
-    def __init__(self, K, f_ext, bc_dofs, bc_values, nullspace, comm, max_it=50):
+    def __init__(self, K, f_ext, bc_dofs, bc_values, nullspace, comm, max_it=50, contact_pc="auto", band_layers=1):
         self.comm = comm
+        # contact_pc: "auto" | "band" | "none" (see preconditioner.py); band_dofs: size of the last band
+        self.contact_pc, self.band_layers, self.band_dofs = contact_pc, band_layers, 0
         self.u = K.createVecRight()
         self.u.set(0.0)
         ubar = self.u.duplicate()
@@ -148,6 +151,13 @@ class System:
             J.setNearNullSpace(self.K.getNearNullSpace())
             self.J = J
         self.snes.setJacobian(self._jacobian, self.J, self.J)
+        pairs = [t for t in terms if t.name.startswith("contact")]
+        if preconditioner.wants_band(self.contact_pc, bool(pairs)):
+            couplings = [t.G.transposeMatMult(t.G) for t in pairs]
+            self.band_dofs = preconditioner.install_band_pc(self.snes.getKSP(), self.K, couplings,
+                                                            self.band_layers, self.comm)
+            for C in couplings:
+                C.destroy()
         self.prev_active = None
 
     def _residual(self, snes, u, f):
