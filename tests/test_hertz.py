@@ -80,7 +80,7 @@ def test_coarse_hertz_peak_pressure_and_contact_radius(cache, tmp_path, formulat
     """configs/hertz_coarse.toml (sphere slave, nodal rows, a/h = 4.5 on the sphere) shall give, on both contact
     surfaces, a peak nodal traction within 15 % of Hertz's p0 and a contact radius within one element size of
     Hertz's a, both at the measured force. Measured: peak 1.074 p0 (two_pass) and 1.083 p0 (quasi_symmetric);
-    radius within 0.5 element sizes (a - a_H = -0.11 a_H on the sphere with two_pass)."""
+    radius within 0.53 element sizes (a - a_H = -0.11 a_H on the sphere with two_pass)."""
     from qsc_petsc.run import Run
     scene = load_scene(CONFIGS / "hertz_coarse.toml", [f"contact.0.formulation={formulation}", "output.xdmf=false",
                                                         f"bodies.0.mesh.cache={cache}", f"bodies.1.mesh.cache={cache}"])
