@@ -110,6 +110,20 @@ def on_root(comm, fn):
     return result
 
 
+def on_all(comm, fn):
+    """Run fn on every rank; if any rank raises a QscError, every rank raises the first one (by rank)."""
+    result, error = None, None
+    try:
+        result = fn()
+    except QscError as exc:
+        error = exc
+    errors = comm.allgather(error)
+    first = next((e for e in errors if e is not None), None)
+    if first is not None:
+        raise first
+    return result
+
+
 def build_global_mesh(scene):
     """Generate or read every body and merge them into one vertex/cell numbering (rank 0)."""
     points, cells, bodies, masks, names = [], [], [], [], []

@@ -117,3 +117,33 @@ def test_master_node_variant_with_gauss_points_is_consistent(mesh):
     A, B, _ = pair(*mesh, zfun=flat)
     rows = quasi_symmetric_master_nodes(gauss_pass(A, B, 3), gauss_pass(B, A, 3), make_pass(B, A), 0.5)
     assert rows.phi * rows.W_vals.sum() == pytest.approx(1.0, rel=1e-12)
+
+
+def segment(S, T, radius=0.2):
+    xs, xt = S.xyz[S.faces], T.xyz[T.faces]
+    return quadrature.segment_pass((S.type, T.type), xs, xs, S.gfaces, xt, xt, T.gfaces, T.face_size, radius)
+
+
+@pytest.mark.parametrize("mesh", [(3, "quad", 4, "quad"), (4, "tri", 3, "quad")])
+@pytest.mark.parametrize("name", RULES)
+def test_segment_rows_force_and_jacobian_are_derivatives(name, mesh):
+    """Segment rows on a warped interface: G^T m shall be the energy gradient and G^T D G its Hessian."""
+    A, B, ndof = pair(*mesh)
+    rows = RULES[name](segment(A, B), segment(B, A))
+    check_derivatives(rows, ndof, away_from_kinks(rows, ndof, 0.01, seed=6))
+
+
+@pytest.mark.parametrize("face_type", ["quad", "tri"])
+def test_segment_mortar_integrals_are_exact_on_flat_meshes(face_type):
+    """On flat non-nested meshes segment integration gives the limit of the Gauss rules: int N_S^k N_T^j ds,
+    and W = the nodal areas of S."""
+    A, B, ndof = pair(3, face_type, 7, face_type, zfun=flat)
+    sp = segment(A, B)
+    seg, _ = mortar_matrix(A, B, master_slave(sp))
+    fine, _ = mortar_matrix(A, B, master_slave(gauss_pass(A, B, 10)))
+    coarse, _ = mortar_matrix(A, B, master_slave(gauss_pass(A, B, 5)))
+    assert np.abs(seg - fine).max() < np.abs(coarse - fine).max()       # closer to the limit than 5x5 Gauss
+    W = np.zeros(ndof)
+    rows = master_slave(sp)
+    np.add.at(W, rows.W_rows, rows.W_vals)
+    np.testing.assert_allclose(W[3 * A.ids], A.area, rtol=1e-12)

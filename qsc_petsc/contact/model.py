@@ -16,6 +16,7 @@ from petsc4py import PETSc
 
 from .. import assembly, fem
 from ..errors import SceneError
+from ..mesh import on_all
 from ..solver import ConstraintTerm
 from . import quadrature
 from . import rows as row_builders
@@ -151,8 +152,9 @@ def segment_pass(mesh, S, T, X, U, radius, degree=4):
     """Exact (segment) integration of this rank's S faces against T's faces (local and gathered): a rows.Pass."""
     f = S.faces
     gv, _, fx, fu, fsize = _target_faces(mesh, T, X, U, (X[f] + U[f]).reshape(-1, 3), radius)
-    return quadrature.segment_pass(mesh.face_type, X[f], X[f] + U[f], mesh.gvert[f], fx, fx + fu, gv, fsize,
-                                   radius, degree)
+    # a folded or non-convex face raises MeshError on the rank that meets it: all ranks stop together
+    return on_all(mesh.comm, lambda: quadrature.segment_pass(mesh.face_type, X[f], X[f] + U[f], mesh.gvert[f], fx,
+                                                             fx + fu, gv, fsize, radius, degree))
 
 
 def integration_pass(mesh, spec, S, T, X, U, radius):

@@ -61,29 +61,31 @@ def found_pass(points, found, t_gids, t_xref, t_size):
 def segment_pass(face_type, xs_ref, xs_cur, s_gids, xt_ref, xt_cur, t_gids, t_size, radius, degree=4):
     """Exact (segment) integration of S faces against T faces: the overlaps cut into quadrature points, a Pass.
 
-    The faces are clipped in their current configuration (which decides what meets what);
+    face_type: "tri"/"quad", or a pair (S type, T type). The faces are clipped in their current configuration
+    (which decides what meets what);
     points farther than radius [m] from T along its normal are dropped; weights are areas on
     the reference S surface, like the nodal areas.
     """
     from .clipping import candidate_pairs, segment_quadrature
-    nv_s, nv_t = fem.FACE_NODES[face_type], fem.FACE_NODES[face_type]
+    type_s, type_t = (face_type, face_type) if isinstance(face_type, str) else face_type
+    nv_s, nv_t = fem.FACE_NODES[type_s], fem.FACE_NODES[type_t]
     if len(xs_cur) == 0 or len(xt_cur) == 0:
         return Pass.empty(nv_s, nv_t)
     i, j = candidate_pairs(xs_cur, xt_cur, radius)
     if len(i) == 0:
         return Pass.empty(nv_s, nv_t)
-    q = segment_quadrature(face_type, xs_cur[i], face_type, xt_cur[j], degree=degree)
+    q = segment_quadrature(type_s, xs_cur[i], type_t, xt_cur[j], degree=degree)
     si, tj = i[q["pair"]], j[q["pair"]]
-    Ns, _ = fem.SHAPE[face_type](q["xi_s"])
-    Nt, _ = fem.SHAPE[face_type](q["xi_t"])
-    normal = geometry.face_normal_at(face_type, xt_cur[tj], q["xi_t"])
+    Ns, _ = fem.SHAPE[type_s](q["xi_s"])
+    Nt, _ = fem.SHAPE[type_t](q["xi_t"])
+    normal = geometry.face_normal_at(type_t, xt_cur[tj], q["xi_t"])
     gap = np.einsum("pi,pi->p", q["x"] - np.einsum("pv,pvi->pi", Nt, xt_cur[tj]), normal)
     k = np.abs(gap) <= radius
     si, tj, Ns, Nt, normal = si[k], tj[k], Ns[k], Nt[k], normal[k]
     xi_s = q["xi_s"][k]
 
     def jac(xf):
-        return np.linalg.norm(np.cross(*geometry.face_tangents_at(face_type, xf, xi_s)), axis=-1)
+        return np.linalg.norm(np.cross(*geometry.face_tangents_at(type_s, xf, xi_s)), axis=-1)
     weight = q["weight"][k] * jac(xs_ref[si]) / jac(xs_cur[si])
     x_ref = np.einsum("pv,pvi->pi", Ns, xs_ref[si])
     delta0 = np.einsum("pi,pi->p", x_ref - np.einsum("pv,pvi->pi", Nt, xt_ref[tj]), normal)

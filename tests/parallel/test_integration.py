@@ -13,6 +13,7 @@ RULES = {
     "gauss_qs_points": GAUSS_QS,
     "gauss_qs_master_nodes": GAUSS_QS + ["contact.0.master_multiplier=master_nodes"],
     "gauss_two_pass": ["contact.0.formulation=two_pass", "contact.0.integration=gauss", "contact.0.gauss_points=3"],
+    "segment_qs": ["contact.0.formulation=quasi_symmetric", "contact.0.integration=segment"],
 }
 
 
@@ -60,3 +61,16 @@ def test_gauss_quasi_symmetric_meets_the_issue_target(comm, mpi_tmp, lower, uppe
     if comm.rank == 0:
         swap = np.linalg.norm(us["upper"] - us["lower"]) / np.linalg.norm(us["upper"])
         assert swap < 1e-4
+
+
+@pytest.mark.parametrize("formulation", ["master_slave", "two_pass", "quasi_symmetric"])
+@pytest.mark.parametrize("lower, upper", [(4, 7), (3, 10), (5, 16)])
+def test_segment_integration_passes_the_patch_test(comm, mpi_tmp, formulation, lower, upper):
+    """Exact (segment) integration: max |sigma_zz + p|/p < 1e-8 on non-nested meshes for every formulation and
+    both slave choices, alpha 1e4, on any number of ranks."""
+    for side, (slave, master) in SIDES.items():
+        err, _, _ = solve(comm, mpi_tmp / side, [
+            f"contact.0.formulation={formulation}", "contact.0.integration=segment",
+            f"bodies.0.mesh.cells=[{lower},{lower},2]", f"bodies.1.mesh.cells=[{upper},{upper},2]",
+            f"contact.0.slave={slave}", f"contact.0.master={master}"])
+        assert err < 1e-8
