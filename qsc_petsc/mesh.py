@@ -131,7 +131,7 @@ def build_global_mesh(scene):
     for b, body in enumerate(scene.bodies):
         spec = body.mesh
         if spec.type == "box":
-            bm = box_mesh(spec.origin, spec.size, spec.cells, spec.element)
+            bm = box_mesh(spec.origin, spec.size, spec.cells, spec.element, spec.rotation)
         elif spec.type == "hertz":
             from .hertz import mesh_file
             bm = read_mesh_file(str(mesh_file(spec.part, spec.level, spec.radius, spec.cache)))

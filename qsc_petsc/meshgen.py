@@ -57,8 +57,21 @@ class BodyMesh:
     surfaces: dict[str, np.ndarray] = field(default_factory=dict)  # name -> (k, 2) int64 (cell, local face)
 
 
-def box_mesh(origin, size, cells, element="hex"):
-    """Structured mesh of the box [origin, origin + size] with cells = (nx, ny, nz) hexes, or 6 tets per hex."""
+def rotation_matrix(rotation_degrees):
+    """The rotation (3, 3) of a rotation vector: axis times angle in degrees (Rodrigues)."""
+    v = np.radians(np.asarray(rotation_degrees, dtype=float).reshape(3))
+    theta = np.linalg.norm(v)
+    if theta == 0.0:
+        return np.eye(3)
+    k = v / theta
+    Kx = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+    return np.eye(3) + np.sin(theta) * Kx + (1.0 - np.cos(theta)) * Kx @ Kx
+
+
+def box_mesh(origin, size, cells, element="hex", rotation=(0.0, 0.0, 0.0)):
+    """Structured mesh of the box [origin, origin + size] with cells = (nx, ny, nz) hexes, or 6 tets per hex,
+    rotated about the point (0, 0, 0) by the rotation vector `rotation` (axis times angle, degrees), so that
+    boxes stacked in one frame and given the same rotation stay stacked."""
     n = np.asarray(cells)
     if n.shape != (3,) or not np.issubdtype(n.dtype, np.integer) or (n < 1).any():
         raise MeshError(f"box cells must be three positive integers, got {cells!r}")
@@ -72,6 +85,8 @@ def box_mesh(origin, size, cells, element="hex"):
     axes = [o + s * np.arange(k + 1) / k for o, s, k in zip(np.asarray(origin, float), np.asarray(size, float), n)]
     Z, Y, X = np.meshgrid(axes[2], axes[1], axes[0], indexing="ij")      # point id i + (nx+1) (j + (ny+1) k)
     points = np.column_stack([X.ravel(), Y.ravel(), Z.ravel()])
+    if np.any(np.asarray(rotation, dtype=float) != 0.0):
+        points = points @ rotation_matrix(rotation).T
     stride = np.array([1, nx + 1, (nx + 1) * (ny + 1)])
     base = (np.arange(nx) + stride[1] * np.arange(ny)[:, None] + stride[2] * np.arange(nz)[:, None, None]).ravel()
     hexes = base[:, None] + _CUBE @ stride                               # cell id i + nx (j + ny k)

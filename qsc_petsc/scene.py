@@ -404,6 +404,9 @@ BODY = Table({
             "size": Vec3(Float(gt=0), "Edge lengths of the box along x, y, z.", unit="m"),
             "cells": Vec3(Int(ge=1), "Number of cells along x, y, z."),
             "element": Choice(("hex", "tet"), "Cell type of the generated mesh.", default="hex"),
+            "rotation": Vec3(Float(), "Rotation vector applied to the generated box about (0, 0, 0): axis times "
+                             "angle (right hand); faces keep their names; bodies given the same rotation keep "
+                             "their relative placement.", default=[0, 0, 0], unit="degrees"),
         },
         "file": {
             "path": Str("Mesh file, relative to the scene file's folder; its physical groups name the surfaces."),

@@ -161,3 +161,17 @@ def test_read_errors(tmp_path):
     meshio.write(mixed, meshio.Mesh(hexes.points, [("hexahedron", hexes.cells), ("tetra", np.array([[0, 1, 3, 4]]))]))
     with pytest.raises(MeshError, match="all tetra or all hexahedron.*1 hexahedron, 1 tetra"):
         read_mesh_file(mixed)
+
+
+def test_rotated_box_keeps_shape_and_face_names():
+    """A rotated box shall be the rigidly rotated box: same distances, faces with the same names, rotated normals."""
+    from qsc_petsc.meshgen import rotation_matrix
+    rot = [10.0, 20.0, -30.0]
+    plain = box_mesh(ORIGIN, SIZE, CELLS, "hex")
+    turned = box_mesh(ORIGIN, SIZE, CELLS, "hex", rot)
+    R = rotation_matrix(rot)
+    np.testing.assert_allclose(R @ R.T, np.eye(3), atol=1e-15)
+    np.testing.assert_allclose(turned.points, plain.points @ R.T, atol=1e-14)
+    assert turned.surfaces.keys() == plain.surfaces.keys()
+    np.testing.assert_array_equal(turned.cells, plain.cells)
+    np.testing.assert_allclose(rotation_matrix([0, 0, 90]) @ [1, 0, 0], [0, 1, 0], atol=1e-15)

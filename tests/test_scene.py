@@ -245,7 +245,7 @@ def test_unknown_key_inside_a_variant_lists_that_variants_keys():
     data = two_cubes()
     data["bodies"][0]["mesh"]["sise"] = [1, 1, 1]
     assert error_of(data) == (
-        "bodies[0].mesh.sise: unknown key (expected one of: cells, element, origin, size, type)")
+        "bodies[0].mesh.sise: unknown key (expected one of: cells, element, origin, rotation, size, type)")
 
 
 # ---------------------------------------------------------------- mesh files
