@@ -76,3 +76,23 @@ def options_text(options, from_scene):
         source = "scene" if name in from_scene else "command line" if name in _AT_START_UP else "program default"
         lines.append(f"-{name} {value}".rstrip() + f"    # {source}")
     return "\n".join(lines) + "\n"
+
+
+# PETSc error codes that setFromOptions raises for a bad option: wrong argument, out of range (a value
+# that does not parse), unknown type (a misspelt or missing solver package)
+_OPTION_ERRORS = {62: "a wrong argument", 63: "a value out of range or not a number", 86: "an unknown type"}
+
+
+def set_from_options(obj, what):
+    """obj.setFromOptions(), with a refused option turned into a SceneError (exit 2 on every rank: the
+    options database is the same everywhere, so every rank fails here together)."""
+    from petsc4py import PETSc
+
+    from .errors import SceneError
+    try:
+        obj.setFromOptions()
+    except PETSc.Error as exc:
+        if exc.ierr not in _OPTION_ERRORS:
+            raise
+        raise SceneError(f"PETSc options of the {what}: {_OPTION_ERRORS[exc.ierr]} (PETSc error {exc.ierr}; "
+                         "PETSc's message above names the option)") from None

@@ -14,6 +14,8 @@ factor: `qsc_sub_1_sub_pc_type`, default cholesky with MUMPS).
 import numpy as np
 from petsc4py import PETSc
 
+from .options import set_from_options
+
 DEFAULTS = {"sub_1_sub_pc_type": "cholesky", "sub_1_sub_pc_factor_mat_solver_type": "mumps",
             "sub_1_sub_ksp_type": "preonly"}
 
@@ -79,8 +81,8 @@ def install_band_pc(ksp, K, couplings, layers, comm):
     sub = PETSc.IS().createGeneral(band, comm=PETSc.COMM_SELF)
     asm.setASMLocalSubdomains(1, [sub], [sub])
     asm.setASMType(PETSc.PC.ASMType.BASIC)
-    gamg.setFromOptions()
-    asm.setFromOptions()
+    set_from_options(gamg, "contact band's GAMG (-qsc_sub_0_*)")
+    set_from_options(asm, "contact band's ASM (-qsc_sub_1_*)")
     ksp.setPC(pc)
     sub.destroy()
     return comm.allreduce(len(band))

@@ -10,7 +10,7 @@ import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from . import preconditioner
+from . import options, preconditioner
 from .contact.penalty import multipliers_update, row_response
 from .errors import ConvergenceError, SceneError
 
@@ -135,7 +135,7 @@ class System:
         self.snes.setFunction(self._residual, self.r)
         self.snes.setJacobian(self._jacobian, self.J, self.J)
         self.snes.setConvergenceTest(self._converged)
-        self.snes.setFromOptions()
+        options.set_from_options(self.snes, "solver (-qsc_snes_*, -qsc_ksp_*, -qsc_pc_*)")
 
     def set_terms(self, terms):
         """Install the constraint terms of a new search; rebuild the Jacobian's sparsity once."""

@@ -376,3 +376,13 @@ def test_command_line_options_win_over_the_scene(tmp_path):
     # a direct solve: one Krylov "iteration" per Newton iteration
     step = summary["steps"][0]
     assert step["ksp_iterations"] == step["snes_iterations"] >= 1
+
+
+@pytest.mark.parametrize("option", [["-qsc_pc_type", "nonexistent"], ["-qsc_ksp_rtol", "abc"]])
+def test_bad_petsc_option_is_an_input_error(tmp_path, option):
+    """A PETSc option PETSc refuses (unknown type, value that does not parse) shall exit 2 with one qsc line."""
+    proc = subprocess.run([sys.executable, "-m", "qsc_petsc.cli", "run", str(CONFIGS / "block_compression.toml"),
+                           "--out", str(tmp_path), *option], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2
+    assert "qsc: error: PETSc options of the solver" in proc.stdout
+    assert "Traceback" not in proc.stderr + proc.stdout
