@@ -32,7 +32,7 @@ OUT = ROOT / "results" / "nonuniform"
 def run(name, sets):
     out = OUT / name
     cmd = [str(QSC), "run", str(ROOT / "configs" / "patch_test.toml"), "--out", str(out), "--set", LOAD,
-           "--set", "load.steps=1"] + [a for s in sets for a in ("--set", s)]
+           "--set", "load.steps=1", "--set", "contact.0.integration=nodal"] + [a for s in sets for a in ("--set", s)]
     subprocess.run(cmd, env=ENV, check=True, capture_output=True, text=True)
     return out
 

@@ -36,7 +36,8 @@ def solve(lower, upper, formulation, weight, slave, alpha, extra=()):
     s_ref, m_ref = SIDES[slave]
     sets = [f"bodies.0.mesh.cells=[{lower},{lower},2]", f"bodies.1.mesh.cells=[{upper},{upper},2]",
             f"contact.0.formulation={formulation}", f"contact.0.slave={s_ref}", f"contact.0.master={m_ref}",
-            f"contact.0.penalty={alpha}", "load.steps=1", "output.xdmf=false", *extra]
+            f"contact.0.penalty={alpha}", "load.steps=1", "output.xdmf=false",
+            "contact.0.integration=nodal", *extra]      # the table is about node-to-segment rows unless extra says
     if weight is not None:
         sets.append(f"contact.0.weight={weight}")
     scene = load_scene(ROOT / "configs" / "patch_test.toml", sets)

@@ -42,6 +42,9 @@ def scene(path=PATCH, sets=(), edit=None):
     """A validated scene: the file with --set overrides (one load step, no XDMF), then edit(data) on its dict."""
     from qsc_petsc.scene import load_scene, parse_scene
     base = load_scene(path, ["load.steps=1", "output.xdmf=false", *sets])
+    if base.contact and not any(s.startswith("contact.0.integration=") for s in sets):
+        # these tables measure the node-to-segment rows unless a case names its integration
+        base = load_scene(path, ["load.steps=1", "output.xdmf=false", "contact.0.integration=nodal", *sets])
     if edit is None:
         return base
     data = base.to_dict()

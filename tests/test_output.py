@@ -149,7 +149,9 @@ def test_two_ranks_write_the_same_results(serial, parallel):
                     assert set(np.unique(b)) == {0.0, 1.0}
                     continue
                 scale = max(np.abs(a).max(), np.finfo(float).tiny)
-                assert np.abs(a - b).max() <= 1e-10 * scale, (step, name, np.abs(a - b).max(), scale)
+                # penetrations are differences of O(1 m) coordinates: their round-off is ~1e-16 m absolute
+                floor = 1e-14 if name == "contact_penetration" else 0.0
+                assert np.abs(a - b).max() <= 1e-10 * scale + floor, (step, name, np.abs(a - b).max(), scale)
     s1, s2 = summary_of(serial), summary_of(parallel)
     for a, b in zip(s1["steps"], s2["steps"]):
         for key, force in a["reactions"].items():
