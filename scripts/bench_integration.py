@@ -14,9 +14,9 @@ from benchlib import add_docs_args, run, write_table
 
 # (label, formulation, lines added to the [[contact]] table)
 OPTIONS = [
-    ("master_slave, nodal", "master_slave", ""),
+    ("master_slave, nodal", "master_slave", 'integration = "nodal"\n'),
     ("master_slave, segment", "master_slave", 'integration = "segment"\n'),
-    ("quasi_symmetric 0.5, nodal", "quasi_symmetric", ""),
+    ("quasi_symmetric 0.5, nodal", "quasi_symmetric", 'integration = "nodal"\n'),
     ("quasi_symmetric h^4, gauss 2", "quasi_symmetric", 'integration = "gauss"\ngauss_points = 2\nweight = {power = 4}\n'),
     ("quasi_symmetric h^4, gauss 3", "quasi_symmetric", 'integration = "gauss"\ngauss_points = 3\nweight = {power = 4}\n'),
     ("quasi_symmetric h^4, gauss 5", "quasi_symmetric", 'integration = "gauss"\ngauss_points = 5\nweight = {power = 4}\n'),
