@@ -113,7 +113,7 @@ def main():
     ref_dir = run(OUT / "reference", case_sets(REFERENCE, REFERENCE), args.reuse)
     ref = load_result(ref_dir)
     check = errors(load_result(run(OUT / "reference_check", case_sets(CHECK, CHECK), args.reuse)), ref)
-    print("reference check (%d vs %d): " % (CHECK, REFERENCE) + ", ".join(f"{k} {check[k]:.2e}" for k in NORMS))
+    print(f"reference check ({CHECK} vs {REFERENCE}): " + ", ".join(f"{k} {check[k]:.2e}" for k in NORMS))
     rows = measure(OUT, SERIES, ref, reuse=args.reuse)
     for r in rows:
         print(f"{r['label']:45s} {r['lower']}/{r['upper']} {r['dofs']:6d} dofs  "
