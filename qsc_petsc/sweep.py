@@ -497,8 +497,16 @@ def write_outputs(plan, rows, command):
 
 # ---------------------------------------------------------------- the sweep
 
-def sweep(plan, say=print):
-    """Run the reference, then every combination; write the outputs after each run. Returns the rows."""
+def sweep(plan, say=print, reference=None):
+    """Run the reference, then every combination; write the outputs after each run. Returns the rows.
+
+    `reference`: the reference row (rows[0]) of an earlier sweep whose reference run is this plan's
+    (the same command), reused instead of solved again -- sweeps that share one costly reference."""
+    if reference is not None:
+        expected = run_command(plan, plan.reference, reference["folder"])
+        if reference.get("command") != expected:
+            raise ValueError(f"the reused reference ran {shlex.join(reference.get('command', []))}; this "
+                             f"sweep's reference would run {shlex.join(expected)}")
     plan.out.mkdir(parents=True, exist_ok=True)
     command = "qsc sweep " + shlex.join(plan.argv)
     combos = plan.combinations()
@@ -514,10 +522,13 @@ def sweep(plan, say=print):
         say(f"[{i}/{n}] {rec['name']}: {describe(rec['combo'])}: {what} in {rec['wall_time']:.2f} s{iters}{err}",
             flush=True)
 
-    ref = execute(plan, plan.reference, plan.out / "reference")
-    ref.update(name="reference", combo=dict(plan.reference), is_reference=True)
-    if ref["status"] == "ok":
-        compare_with_reference(ref, ref)
+    if reference is not None:
+        ref = dict(reference)
+    else:
+        ref = execute(plan, plan.reference, plan.out / "reference")
+        ref.update(name="reference", combo=dict(plan.reference), is_reference=True)
+        if ref["status"] == "ok":
+            compare_with_reference(ref, ref)
     rows.append(ref)
     report(1, ref)
     write_outputs(plan, rows, command)

@@ -96,7 +96,8 @@ def test_sweep_writes_csv_table_and_plot(tmp_path, capsys, mpi_env):
 
 @pytest.mark.skipif(shutil.which("mpirun") is None, reason="mpirun not found")
 def test_failed_and_unconverged_runs_are_recorded(tmp_path, capsys, mpi_env):
-    """One CG iteration cannot converge, a malformed option value crashes its run: both recorded, the sweep goes on."""
+    """One CG iteration cannot converge, a malformed option value is refused as bad input: both recorded, the
+    sweep goes on."""
     out = tmp_path / "sweep"
     code = cli.main(["sweep", SCENE, *TINY, "--set", "petsc.ksp_type=cg", "--set", "petsc.pc_type=jacobi",
                      "--set", "solver.max_cutbacks=0", "--vary", "-qsc_ksp_max_it=1000,1,many", "--out", str(out)])
@@ -108,7 +109,7 @@ def test_failed_and_unconverged_runs_are_recorded(tmp_path, capsys, mpi_env):
     assert "DIVERGED" in stuck["message"] and stuck["displacement_l2"] == ""
     crashed = rows["run_003"]
     assert (crashed["-qsc_ksp_max_it"], crashed["status"]) == ("many", "failed")
-    assert crashed["exit_code"] not in ("0", "3") and "many" in crashed["message"], crashed["message"]
+    assert crashed["exit_code"] == "2" and "PETSc options" in crashed["message"], crashed["message"]
     assert len([ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("[")]) == 4   # one per run
 
 
@@ -132,3 +133,22 @@ def test_ranks_key_sets_the_rank_count(tmp_path, capsys, mpi_env):
     rows = read_csv(out / "sweep.csv")
     assert [(r["ranks"], r["mpi_ranks"]) for r in rows] == [("1", "1"), ("1", "1"), ("2", "2")]
     assert float(rows[2]["displacement_l2"]) < 1e-10 and float(rows[2]["traction"]) < 1e-8
+
+
+@pytest.mark.skipif(shutil.which("mpirun") is None, reason="mpirun not found")
+def test_a_second_sweep_reuses_the_reference_run(tmp_path, capsys, mpi_env):
+    """sweep(plan, reference=rows[0]): the earlier reference run is compared against, not solved again."""
+    from qsc_petsc.sweep import make_plan, sweep
+    common = [SCENE, *TINY, "--reference", "contact.0.penalty=1e6"]
+    first = sweep(make_plan([*common, "--vary", "contact.0.penalty=1e2", "--out", str(tmp_path / "a")]))
+    second = sweep(make_plan([*common, "--vary", "contact.0.penalty=1e4", "--out", str(tmp_path / "b")]),
+                   reference=first[0])
+    assert not (tmp_path / "b" / "reference").exists()
+    assert second[0]["folder"] == first[0]["folder"] and second[1]["status"] == "ok"
+    assert 0.0 < second[1]["errors"]["displacement_l2"] < first[1]["errors"]["displacement_l2"]
+    rows = read_csv(tmp_path / "b" / "sweep.csv")
+    assert rows[0]["folder"] == str(tmp_path / "a" / "reference")
+    for other in ([SCENE, *TINY, "--vary", "contact.0.penalty=1e4"],                         # reference 1e4
+                  [*common, "--set", "contact.0.integration=gauss", "--vary", "contact.0.penalty=1e4"]):
+        with pytest.raises(ValueError, match="reused reference"):
+            sweep(make_plan([*other, "--out", str(tmp_path / "c")]), reference=first[0])
