@@ -499,7 +499,7 @@ SCHEMA = Table({
     "solver": Table({
         "max_cutbacks": Int("How many times a failed load step is halved before the run stops.", ge=0, default=4),
         "max_active_set_iterations": Int("Most active-set (semi-smooth Newton) iterations per load step.", ge=1,
-                                         default=30),
+                                         default=60),
         "active_set_tolerance": Float("Relative closed-set tolerance on the constraint rows.", gt=0, default=1e-12),
         "contact_preconditioner": Choice(("auto", "band", "none"),
                                          "Linear solves with contact pairs: \"band\" composes GAMG with an exact "
