@@ -157,10 +157,10 @@ def surface_load(mesh, scene, template):
             continue
         c, lf = mesh.surface_faces(bc.surface)
         nodes = mesh.face_nodes(c, lf)
-        value = compile_expression(bc.value) if isinstance(bc.value, str) else bc.value
+        field = isinstance(bc.value, str)
         # a pressure field varies within faces: a 3-point rule per direction integrates it better than 2
-        fe = fem.face_pressure_loads(mesh.face_type, mesh.coords[nodes], value,
-                                     n_gauss=3 if isinstance(bc.value, str) else 2)
+        fe = fem.face_pressure_loads(mesh.face_type, mesh.coords[nodes],
+                                     compile_expression(bc.value) if field else bc.value, n_gauss=3 if field else 2)
         dofs = (3 * mesh.gvert[nodes][:, :, None] + np.arange(3)).ravel()
         f.setValues(dofs.astype(PETSc.IntType), fe.ravel(), addv=ADD)
     f.assemble()

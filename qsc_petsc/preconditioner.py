@@ -47,8 +47,8 @@ def band_dofs(K, couplings, layers=1):
 
 
 def effective_option(name, default=None):
-    opts = PETSc.Options()
-    return opts.getString("qsc_" + name, default) if opts.hasName("qsc_" + name) else default
+    """The value of option qsc_<name> in the database, or default."""
+    return PETSc.Options().getString("qsc_" + name, default)
 
 
 def wants_band(mode, has_pairs):

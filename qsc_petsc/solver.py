@@ -140,24 +140,23 @@ class System:
     def set_terms(self, terms):
         """Install the constraint terms of a new search; rebuild the Jacobian's sparsity once."""
         self.terms = terms
+        # G^T G of every term: the Jacobian's contact stencil, and the contact pairs' band for the preconditioner
+        stencils = [term.G.transposeMatMult(term.G) for term in terms]
         if not terms:
             self.J = self.K
         else:
             J = self.K.copy()
-            for term in terms:
-                GtG = term.G.transposeMatMult(term.G)
+            for GtG in stencils:
                 J.axpy(1.0, GtG, PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
-                GtG.destroy()
             J.setNearNullSpace(self.K.getNearNullSpace())
             self.J = J
         self.snes.setJacobian(self._jacobian, self.J, self.J)
-        pairs = [t for t in terms if t.name.startswith("contact")]
+        pairs = [GtG for term, GtG in zip(terms, stencils) if term.name.startswith("contact")]
         if preconditioner.wants_band(self.contact_pc, bool(pairs)):
-            couplings = [t.G.transposeMatMult(t.G) for t in pairs]
-            self.band_dofs = preconditioner.install_band_pc(self.snes.getKSP(), self.K, couplings,
+            self.band_dofs = preconditioner.install_band_pc(self.snes.getKSP(), self.K, pairs,
                                                             self.band_layers, self.comm)
-            for C in couplings:
-                C.destroy()
+        for GtG in stencils:
+            GtG.destroy()
         self.prev_active = None
 
     def _residual(self, snes, u, f):

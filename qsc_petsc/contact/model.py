@@ -151,9 +151,10 @@ def gauss_pass(mesh, S, T, X, U, radius, n):
 def segment_pass(mesh, S, T, X, U, radius, degree=4):
     """Exact (segment) integration of this rank's S faces against T's faces (local and gathered): a rows.Pass."""
     f = S.faces
-    gv, _, fx, fu, fsize = _target_faces(mesh, T, X, U, (X[f] + U[f]).reshape(-1, 3), radius)
+    xs_cur = X[f] + U[f]
+    gv, _, fx, fu, fsize = _target_faces(mesh, T, X, U, xs_cur.reshape(-1, 3), radius)
     # a folded or non-convex face raises MeshError on the rank that meets it: all ranks stop together
-    return on_all(mesh.comm, lambda: quadrature.segment_pass(mesh.face_type, X[f], X[f] + U[f], mesh.gvert[f], fx,
+    return on_all(mesh.comm, lambda: quadrature.segment_pass(mesh.face_type, X[f], xs_cur, mesh.gvert[f], fx,
                                                              fx + fu, gv, fsize, radius, degree))
 
 
@@ -240,7 +241,7 @@ class ContactModel:
                 mp = None
                 if spec.formulation != "master_slave":
                     mp = integration_pass(mesh, spec, pd["master"], pd["slave"], X, U, pd["radius"])
-            self._check_found(pd, sp, mp)
+            points = self._check_found(pd, sp, mp)
             with self._phase("rows"):
                 if spec.formulation == "master_slave":
                     rows = row_builders.master_slave(sp)
@@ -257,8 +258,7 @@ class ContactModel:
                         rows = row_builders.quasi_symmetric(sp, mp, weight)
                 term = self._term(f"contact[{pd['index']}]", rows, pd["eps_n"], pd["h_eff"],
                                   spec.enforcement == "augmented_lagrangian")
-                term.points = self.comm.allreduce(len(sp.node) + (len(mp.node) if mp is not None else 0),
-                                                  op=MPI.SUM)
+                term.points = points
                 out.append(term)
         for dd in self.dies:
             spec = dd["spec"]
@@ -286,13 +286,16 @@ class ContactModel:
         return (*G, *g, *W)
 
     def _check_found(self, pd, sp, mp):
-        """Surfaces declared in contact must meet within the search distance somewhere (all ranks agree)."""
+        """Surfaces declared in contact must meet within the search distance somewhere (all ranks agree).
+
+        Returns the number of points projected (both passes, all ranks)."""
         found = self.comm.allreduce(len(sp.node) + (len(mp.node) if mp is not None else 0), op=MPI.SUM)
         if found == 0:
             spec = pd["spec"]
             raise SceneError(f"contact[{pd['index']}]: no node of {spec.slave!r} or {spec.master!r} is within the "
                              f"search distance ({pd['radius']:.3g} m = search_distance x element size) of the "
                              f"other surface; increase contact[{pd['index']}].search_distance or check the geometry")
+        return found
 
     def add_forces(self, u, r):
         """r += sum of G^T m over all terms at u (for reactions)."""

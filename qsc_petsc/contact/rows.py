@@ -119,11 +119,6 @@ class Pass:
                     normal=np.zeros((0, 3)), delta0=z, target_size=z, source_nodes=np.zeros((0, ns), dtype=_I),
                     source_shape=np.zeros((0, ns)))
 
-    @property
-    def nodal(self):
-        """True for nodal quadrature: every point is an S node."""
-        return self.source_nodes.shape[1] == 1
-
     @staticmethod
     def from_search(node, area, size, found, face_nodes, face_size):
         """The Pass of the points that found a face: found is search.closest_faces' dict for points `node`.
@@ -261,21 +256,21 @@ def project_master_rows(parts, node_pass):
     order = np.argsort(node_pass.node, kind="stable")
     known = node_pass.node[order]
 
-    def spread(rows, *vals):
+    def spread(rows):
+        """For every entry of row 3 l: the new rows 3 k, the entry it comes from and its factor N^k."""
         l = np.asarray(rows, dtype=_I) // 3
         i = np.minimum(np.searchsorted(known, l), max(len(known) - 1, 0))
         hit = (known[i] == l) if len(known) else np.zeros(len(l), dtype=bool)
         pos = order[i[hit]]
         N = node_pass.shape[pos]                                   # (h, nv)
         e, kk = np.nonzero(N != 0.0)
-        src = np.flatnonzero(hit)[e]
-        return (3 * node_pass.target_nodes[pos[e], kk],) + tuple(np.asarray(v)[src] * N[e, kk] if v is not None
-                                                                 else None for v in vals), src
+        return 3 * node_pass.target_nodes[pos[e], kk], np.flatnonzero(hit)[e], N[e, kk]
 
-    (G_rows, _, G_vals), src = spread(G_r, None, G_v)
-    (g_rows, g_vals), _ = spread(g_r, g_v)
-    (W_rows, W_vals), _ = spread(W_r, W_v)
-    return G_rows, np.asarray(G_c, dtype=_I)[src], G_vals, g_rows, g_vals, W_rows, W_vals
+    G_rows, src, f = spread(G_r)
+    g_rows, g_src, g_f = spread(g_r)
+    W_rows, W_src, W_f = spread(W_r)
+    return (G_rows, np.asarray(G_c, dtype=_I)[src], np.asarray(G_v)[src] * f,
+            g_rows, np.asarray(g_v)[g_src] * g_f, W_rows, np.asarray(W_v)[W_src] * W_f)
 
 
 def quasi_symmetric_master_nodes(slave_pass, master_pass, master_node_pass, weight=0.5, move=None):
