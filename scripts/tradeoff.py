@@ -134,8 +134,9 @@ def pair_stats(row):
 
 def stress_error(row):
     """max |sigma_zz + p| / p over the cells (cell-centre stresses of the last step); p from the scene."""
-    import h5py
     import tomllib
+
+    import h5py
     folder = ROOT / row["folder"]
     scene = tomllib.loads((folder / "scene.resolved.toml").read_text())
     p = next(b["value"] for b in scene["boundary"] if b["type"] == "pressure")
@@ -490,6 +491,7 @@ def hertz_measures(row):
     """scripts/hertz.py's measures (Hertz's a and p0 at the measured force; per surface fit p(0), max t, a)."""
     import h5py
     import hertz as hertz_script
+
     from qsc_petsc.scene import load_scene
     folder = ROOT / row["folder"]
     s = summary(row)
@@ -517,7 +519,7 @@ def hertz(args):
     for r in rows:
         m = hertz_measures(r)
         r.update(m)
-        points, nnz = pair_stats(r)
+        points, _ = pair_stats(r)
         p0, a = m["p0_hertz"], m["a_hertz"]
         table.append("| " + " | ".join([
             r["level"], r["contact.0.formulation"], r["contact.0.integration"], r["dofs"], r["newton_iterations"],

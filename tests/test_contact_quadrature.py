@@ -3,13 +3,11 @@ weights integrate the right areas, and the rules converge to exact integration."
 
 import numpy as np
 import pytest
+from test_contact_kernels import away_from_kinks, check_derivatives, dense, flat, make_pass, pair, response
 
-from qsc_petsc import fem
 from qsc_petsc.contact import quadrature
 from qsc_petsc.contact.rows import master_slave, quasi_symmetric, quasi_symmetric_master_nodes, two_pass, weights
 from qsc_petsc.contact.search import closest_faces
-
-from test_contact_kernels import away_from_kinks, check_derivatives, dense, flat, make_pass, pair, response
 
 RULES = {
     "master_slave": lambda sp, mp: master_slave(sp),

@@ -2,13 +2,12 @@
 
 import numpy as np
 import pytest
+from conftest import CONFIGS
 
 from qsc_petsc import fem
 from qsc_petsc.errors import SceneError
 from qsc_petsc.expression import ExpressionError, compile_expression
 from qsc_petsc.scene import load_scene
-
-from conftest import CONFIGS
 
 
 def test_expression_evaluates_on_points():
