@@ -92,6 +92,42 @@ def centre_fit(r, t, radius):
     return float(np.linalg.lstsq(A, t[near], rcond=None)[0][0])
 
 
+def lumped_traction(points, faces, pressure_field, n_gauss=6):
+    """Nodal traction F_k / A_k [Pa] of a given pressure field on triangles faces (m, 3) of points (n, 3): the
+    consistent nodal force int N_k p ds over the lumped area int N_k ds, the measure of the product's
+    contact_traction output. NaN off the faces. pressure_field: function of points (q, 3) -> (q,) [Pa]."""
+    from . import fem
+    xf = points[faces]
+    force = np.abs(fem.face_pressure_loads("tri", xf, pressure_field, n_gauss)[..., 2])
+    area = fem.face_nodal_areas("tri", xf)
+    F, A = np.zeros(len(points)), np.zeros(len(points))
+    np.add.at(F, faces, force)
+    np.add.at(A, faces, area)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(A > 0, F / A, np.nan)
+
+
+def traction_scatter(points, faces, traction, a, p0, band=0.5):
+    """Where the nodal traction t of one contact surface departs from Hertz's p(r), within r < band * a.
+
+    Nodes on a symmetry plane (x = 0 or y = 0) and the others are taken apart, because the quarter
+    model's symmetry-plane nodes have half a patch. Returns t / p(r) on them (edge_mean; interior_mean,
+    interior_std, interior_max), and exact_error: the largest |F_k/A_k / p(r_k) - 1| of the measure
+    itself applied to the exact Hertz pressure (lumped_traction) on the same nodes."""
+    faces = np.asarray(faces)
+    v = np.unique(faces)
+    r = np.hypot(points[v, 0], points[v, 1])
+    v, r = v[r < band * a], r[r < band * a]
+    pH = pressure(r, a, p0)
+    q = np.asarray(traction, float)[v] / pH
+    tol = TOL * max(float(np.abs(points[faces]).max()), 1e-300)
+    edge = (np.abs(points[v, 0]) < tol) | (np.abs(points[v, 1]) < tol)
+    exact = lumped_traction(points, faces, lambda x: pressure(np.hypot(x[:, 0], x[:, 1]), a, p0))[v] / pH
+    return {"edge_mean": float(q[edge].mean()) if edge.any() else float("nan"),
+            "interior_mean": float(q[~edge].mean()), "interior_std": float(q[~edge].std()),
+            "interior_max": float(q[~edge].max()), "exact_error": float(np.abs(exact - 1.0).max())}
+
+
 # ---------------------------------------------------------------- meshes
 
 def parameters(part, level, radius):

@@ -39,30 +39,42 @@ from qsc_petsc.scene import load_scene
 
 LEVELS = ("coarse", "medium", "fine")
 FORMULATIONS = ("master_slave", "two_pass", "quasi_symmetric")
-# (formulation, integration): every formulation with the scenes' nodal (node-to-segment) rows, and the
-# two symmetric ones with 3 x 3 Gauss points per face (formulation.md section 8)
-CASES = [(f, "nodal") for f in FORMULATIONS] + [("two_pass", "gauss"), ("quasi_symmetric", "gauss")]
-# With Gauss points the active set changes by few points per Newton step: the fine two_pass run needs
-# 33 + 24 iterations (measured), more than the default 30 per load step.
-GAUSS_ITERATIONS = 80
+# (formulation, integration): every formulation with node-to-segment rows, and the two symmetric ones
+# with 3 x 3 Gauss points per face and with exact segment integration (formulation.md section 8)
+CASES = ([(f, "nodal") for f in FORMULATIONS] + [("two_pass", "gauss"), ("quasi_symmetric", "gauss")]
+         + [("two_pass", "segment"), ("quasi_symmetric", "segment")])
+# With Gauss points or segments the active set changes by few points per Newton step: the fine two_pass
+# run with Gauss points needs 33 + 24 iterations (measured), close to the default 60 per load step.
+QUADRATURE_ITERATIONS = 80
 SLAVES = {"sphere": ("sphere.contact", "block.contact"), "block": ("block.contact", "sphere.contact")}
 SURFACES = ("sphere", "block")
 RUNS = ROOT / "build" / "hertz"
-COLUMNS = ["level", "formulation", "integration", "slave", "dofs", "newton", "wall_s", "force", "a_hertz", "p0_hertz"] + [
-    f"{m}_{s}" for s in SURFACES for m in ("max_t", "fit_p0", "a", "h")]
+SCATTER = ("edge_mean", "interior_mean", "interior_std", "interior_max", "exact_error")   # hertz.traction_scatter
+COLUMNS = ["level", "block_level", "formulation", "integration", "slave", "dofs", "newton", "wall_s", "force", "a_hertz",
+           "p0_hertz"] + [f"{m}_{s}" for s in SURFACES for m in ("max_t", "fit_p0", "a", "h", *SCATTER)]
+# Where the finer surface's scatter comes from: the fine sphere on the medium block and the medium sphere on
+# the fine block, (sphere level, block level), two_pass with segments, sphere slave.
+PROBES = [("fine", "medium"), ("medium", "fine")]
 
 
-def overrides(formulation, integration, slave):
+def overrides(formulation, integration, slave, block_level=None):
+    """Scene overrides of a case; block_level meshes the block at another level than the scene's."""
     s, m = SLAVES[slave]
-    extra = [f"solver.max_active_set_iterations={GAUSS_ITERATIONS}"] if integration == "gauss" else []
+    extra = [f"solver.max_active_set_iterations={QUADRATURE_ITERATIONS}"] if integration != "nodal" else []
+    extra += [f"bodies.1.mesh.level={block_level}"] if block_level else []
     return [f"contact.0.formulation={formulation}", f"contact.0.integration={integration}",
             f"contact.0.slave={s}", f"contact.0.master={m}", *extra]
 
 
-def run_case(level, formulation, integration, slave, ranks, petsc=()):
+def case_dir(level, formulation, integration, slave, block_level=None):
+    mixed = f"_block-{block_level}" if block_level and block_level != level else ""
+    return RUNS / f"{level}{mixed}_{formulation}_{integration}_{slave}"
+
+
+def run_case(level, formulation, integration, slave, ranks, petsc=(), block_level=None):
     """One qsc run under mpirun; returns its output folder."""
-    out = RUNS / f"{level}_{formulation}_{integration}_{slave}"
-    sets = [a for o in overrides(formulation, integration, slave) for a in ("--set", o)]
+    out = case_dir(level, formulation, integration, slave, block_level)
+    sets = [a for o in overrides(formulation, integration, slave, block_level) for a in ("--set", o)]
     cmd = ["mpirun", "--oversubscribe", "-n", str(ranks), str(QSC), "run", str(ROOT / "configs" / f"hertz_{level}.toml"),
            "--out", str(out), *sets, *petsc]
     proc = subprocess.run(cmd, env=ENV, cwd=ROOT, capture_output=True, text=True, check=False)
@@ -101,13 +113,14 @@ def measure(scene, points, traction, total_normal_force):
         h = fem.face_size(gm.points[faces])[centre < a_H].mean()
         row.update({f"max_t_{surface}": t.max(), f"fit_p0_{surface}": hertz.centre_fit(r, t, 0.5 * a_H),
                     f"a_{surface}": a, f"h_{surface}": h})
+        row.update({f"{k}_{surface}": x for k, x in hertz.traction_scatter(points, faces, traction, a_H, p0).items()})
         profiles[surface] = (r, t)
     return row, profiles
 
 
-def analyse(level, formulation, integration, slave, out):
+def analyse(level, formulation, integration, slave, out, block_level=None):
     import h5py
-    scene = load_scene(ROOT / "configs" / f"hertz_{level}.toml", overrides(formulation, integration, slave))
+    scene = load_scene(ROOT / "configs" / f"hertz_{level}.toml", overrides(formulation, integration, slave, block_level))
     summary = json.loads((out / "summary.json").read_text())
     if summary["status"] != "ok":
         raise RuntimeError(f"{out}: status {summary['status']}")
@@ -116,7 +129,7 @@ def analyse(level, formulation, integration, slave, out):
         points = h5["mesh/geometry"][:]
         traction = h5[f"step_{len(summary['steps']):04d}/contact_traction"][:, 0]
     row, profiles = measure(scene, points, traction, pair["total_normal_force"])
-    row.update({"level": level, "formulation": formulation, "integration": integration, "slave": slave,
+    row.update({"level": level, "block_level": block_level or level, "formulation": formulation, "integration": integration, "slave": slave,
                 "dofs": summary["mesh"]["dofs"],
                 "newton": sum(s["snes_iterations"] for s in summary["steps"]),
                 "wall_s": sum(summary["time"].values())})
@@ -156,6 +169,8 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--levels", nargs="+", default=list(LEVELS), choices=LEVELS)
     ap.add_argument("--ranks", nargs="+", type=int, default=[1, 1, 2], help="MPI ranks per level")
+    ap.add_argument("--no-probes", dest="probes", action="store_false",
+                    help="skip the two mixed-level runs of the scatter table (sphere fine on block medium and back)")
     ap.add_argument("--reuse", action="store_true",
                     help="keep the finished runs (status ok) already in build/hertz instead of solving them again")
     add_docs_args(ap, "Hertz contact")
@@ -163,27 +178,39 @@ def main():
     if len(args.ranks) != len(args.levels):
         ap.error("--ranks needs one count per level")
     rows, profiles = [], {}
+
+    def case(level, formulation, integration, slave, ranks, block_level=None):
+        t0 = time.perf_counter()
+        out = case_dir(level, formulation, integration, slave, block_level)
+        done = out / "summary.json"
+        if not (args.reuse and done.is_file() and json.loads(done.read_text())["status"] == "ok"):
+            out = run_case(level, formulation, integration, slave, ranks, args.petsc.split(), block_level)
+        row, prof = analyse(level, formulation, integration, slave, out, block_level)
+        row["ranks"] = ranks
+        print(f"{level} (block {row['block_level']}) {formulation} {integration} {slave}: max t/p0 "
+              f"{row['max_t_sphere'] / row['p0_hertz']:.3f} / {row['max_t_block'] / row['p0_hertz']:.3f}, fit "
+              f"{row['fit_p0_sphere'] / row['p0_hertz']:.3f} / {row['fit_p0_block'] / row['p0_hertz']:.3f}, a/a_H "
+              f"{row['a_sphere'] / row['a_hertz']:.3f} / {row['a_block'] / row['a_hertz']:.3f} "
+              f"({time.perf_counter() - t0:.0f} s)", flush=True)
+        return row, prof
+
     for level, ranks in zip(args.levels, args.ranks):
         for formulation, integration in CASES:
             for slave in SLAVES:
-                t0 = time.perf_counter()
-                out = RUNS / f"{level}_{formulation}_{integration}_{slave}"
-                done = out / "summary.json"
-                if not (args.reuse and done.is_file() and json.loads(done.read_text())["status"] == "ok"):
-                    out = run_case(level, formulation, integration, slave, ranks, args.petsc.split())
-                row, prof = analyse(level, formulation, integration, slave, out)
-                row["ranks"] = ranks
+                row, prof = case(level, formulation, integration, slave, ranks)
                 rows.append(row)
                 profiles[(level, formulation, integration, slave)] = prof
-                print(f"{level} {formulation} {integration} {slave}: max t/p0 {row['max_t_sphere'] / row['p0_hertz']:.3f} / "
-                      f"{row['max_t_block'] / row['p0_hertz']:.3f}, fit {row['fit_p0_sphere'] / row['p0_hertz']:.3f}"
-                      f" / {row['fit_p0_block'] / row['p0_hertz']:.3f}, a/a_H {row['a_sphere'] / row['a_hertz']:.3f}"
-                      f" / {row['a_block'] / row['a_hertz']:.3f} ({time.perf_counter() - t0:.0f} s)", flush=True)
+    probes = []
+    if args.probes:
+        for sphere_level, block_level in PROBES:
+            ranks = max(r for lv, r in zip(args.levels, args.ranks) if lv in (sphere_level, block_level)) \
+                if {sphere_level, block_level} & set(args.levels) else 2
+            probes.append(case(sphere_level, "two_pass", "segment", "sphere", ranks, block_level)[0])
     docs = ROOT / "docs"
     with open(docs / "hertz.csv", "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=COLUMNS + ["ranks"])
         w.writeheader()
-        w.writerows(rows)
+        w.writerows(rows + probes)
     plot(rows, profiles, args.levels[-1], docs / "hertz.png")
 
     def pair(row, key, scale=None, fmt="{:.3f}"):
@@ -205,6 +232,24 @@ def main():
                    "sphere surface / block surface; see scripts/hertz.py for the measures. CSV: docs/hertz.csv; "
                    "figure: docs/hertz.png")
     write_table(docs / "verification.md", args.title, "hertz.py", description, headers, table)
+
+    scatter = []
+    for r in [r for r in rows if r["integration"] == "segment"] + probes:
+        scatter.append("| " + " | ".join([
+            r["level"], r["block_level"], r["formulation"], r["slave"],
+            pair(r, "h", lambda r, s: r["a_hertz"]), pair(r, "max_t", lambda r, s: r["p0_hertz"]),
+            *(pair(r, k) for k in ("edge_mean", "interior_mean", "interior_std", "interior_max")),
+            pair(r, "exact_error", fmt="{:.1e}")]) + " |")
+    headers = ["sphere level", "block level", "formulation", "slave", "h / a_H", "max t / p0", "edge nodes: mean t / p",
+               "interior: mean t / p", "interior: std", "interior: max t / p", "measure on exact p: max error"]
+    description = ("segment integration; the same runs as the table above plus two mixed-level runs (two_pass, "
+                   "sphere slave; --no-probes skips them); nodes within r < a_H / 2 of each contact surface, "
+                   "t / p = nodal traction over Hertz's p(r); edge = nodes on a symmetry plane (half patch), "
+                   "interior = the others; last column: the largest error of the traction measure F_k / A_k "
+                   "itself, applied to the exact Hertz pressure on the same mesh (qsc_petsc.hertz.traction_scatter); "
+                   "each pair of numbers is sphere surface / block surface")
+    write_table(docs / "verification.md", args.title + ": scatter of the nodal traction", "hertz.py", description,
+                headers, scatter)
 
 
 if __name__ == "__main__":

@@ -75,14 +75,37 @@ def test_scene_key_errors_name_the_key():
         load_scene(CONFIGS / "hertz_coarse.toml", ["bodies.1.mesh.level=finest"])
 
 
+def test_traction_measure_recovers_the_exact_hertz_pressure_on_the_meshes(cache):
+    """The nodal traction measure F_k / A_k (lumped_traction) applied to the exact Hertz pressure shall recover
+    p(r_k) within 2 % at every node of both coarse contact surfaces within r < a/2 (measured: 1.3 % sphere,
+    1.7 % block; 0.26 % and 0.38 % on the fine meshes, docs/verification.md), so a larger scatter of the solved
+    tractions is the solution's, not the measure's; traction_scatter shall split symmetry-plane nodes from the
+    others."""
+    a, p0 = 0.1, 50.0
+    for part in ("sphere", "block"):
+        m = read_mesh_file(str(hertz.mesh_file(part, "coarse", 1.0, cache)))
+        c, f = m.surfaces["contact"].T
+        faces = fem.cell_faces("tet", m.cells[c], f)
+        exact = hertz.lumped_traction(m.points, faces, lambda x: hertz.pressure(np.hypot(x[:, 0], x[:, 1]), a, p0))
+        stats = hertz.traction_scatter(m.points, faces, hertz.pressure(np.hypot(*m.points[:, :2].T), a, p0), a, p0)
+        assert stats["exact_error"] < 0.02, (part, stats)
+        assert stats["edge_mean"] == pytest.approx(1.0) and stats["interior_std"] < 1e-12
+        v = np.unique(faces)
+        assert np.isfinite(exact[v]).all() and np.isnan(np.delete(exact, v)).all()
+
+
+@pytest.mark.parametrize("integration", ["nodal", "segment"])
 @pytest.mark.parametrize("formulation", ["two_pass", "quasi_symmetric"])
-def test_coarse_hertz_peak_pressure_and_contact_radius(cache, tmp_path, formulation):
-    """configs/hertz_coarse.toml (sphere slave, nodal rows, a/h = 4.5 on the sphere) shall give, on both contact
-    surfaces, a peak nodal traction within 15 % of Hertz's p0 and a contact radius within one element size of
-    Hertz's a, both at the measured force. Measured: peak 1.074 p0 (two_pass) and 1.083 p0 (quasi_symmetric);
-    radius within 0.53 element sizes (a - a_H = -0.11 a_H on the sphere with two_pass)."""
+def test_coarse_hertz_peak_pressure_and_contact_radius(cache, tmp_path, formulation, integration):
+    """configs/hertz_coarse.toml (sphere slave, a/h = 4.9 on the sphere) shall give, on both contact surfaces, a
+    peak nodal traction within 15 % of Hertz's p0 and a contact radius within one element size of Hertz's a,
+    both at the measured force; with segment integration the coarser (block) surface's peak shall be within
+    3 %. Measured: peak 1.073 / 1.074 p0 (sphere / block surface, two_pass nodal), 1.083 / 1.026
+    (quasi_symmetric nodal), 1.135 / 0.998 (two_pass segment), 1.137 / 0.992 (quasi_symmetric segment);
+    radius within 0.67 element sizes."""
     from qsc_petsc.run import Run
     scene = load_scene(CONFIGS / "hertz_coarse.toml", [f"contact.0.formulation={formulation}", "output.xdmf=false",
+                                                        f"contact.0.integration={integration}",
                                                         f"bodies.0.mesh.cache={cache}", f"bodies.1.mesh.cache={cache}"])
     run = Run(scene, MPI.COMM_SELF, tmp_path, log=lambda *a, **k: None)
     try:
@@ -106,6 +129,8 @@ def test_coarse_hertz_peak_pressure_and_contact_radius(cache, tmp_path, formulat
             h = fem.face_size(xf)[np.hypot(*xf.mean(axis=1)[:, :2].T) < a_H].mean()
             a, _ = hertz.loaded_radius(r, t)
             assert abs(t.max() / p0 - 1.0) < 0.15, (name, t.max() / p0)
+            if integration == "segment" and name == "block.contact":
+                assert abs(t.max() / p0 - 1.0) < 0.03, (name, t.max() / p0)
             assert abs(a - a_H) < h, (name, a, a_H, h)
     finally:
         run.destroy()
