@@ -2,8 +2,9 @@
 """Hertz contact (issue 4, part 4): a sphere on a block at 3 refinements, every formulation and slave choice.
 
 Runs configs/hertz_{coarse,medium,fine}.toml (quarter model, gmsh tets, non-matching contact meshes)
-with master_slave, two_pass and quasi_symmetric (nodal integration, as the scenes), two_pass and
-quasi_symmetric with 3 x 3 Gauss points per face, the sphere or the block as slave, and compares the
+with master_slave, two_pass and quasi_symmetric with nodal (node-to-segment) rows, and two_pass and
+quasi_symmetric with 3 x 3 Gauss points per face and with exact segment integration (the scenes'
+default), the sphere or the block as slave, and compares the
 contact pressure and radius with Hertz's solution at the force each run measured: F = 4 x the pair's
 total_normal_force (quarter model), E* from both bodies, a = (3 F R / 4 E*)^(1/3), p0 = 3 F / (2 pi a^2).
 On each contact surface (sphere, block), from the last step's nodal contact_traction:
@@ -13,9 +14,12 @@ On each contact surface (sphere, block), from the last step's nodal contact_trac
   * a: the radius where the traction drops to zero, qsc_petsc.hertz.loaded_radius (the circle that
     best separates nodes with t > 1 % of max t from the others), and (a - a_H) / h with h the mean
     size of that surface's faces within r < a_H.
-Writes docs/hertz.csv, docs/hertz.png (traction against radius, finest level) and the table into
+A second table takes the scatter of the nodal traction apart (hertz.traction_scatter: nodes on the symmetry
+planes against the others, within r < a/2, and the measure's own error on the exact Hertz pressure), for the
+segment runs and two mixed-level runs (fine sphere on the medium block and back; --no-probes skips them).
+Writes docs/hertz.csv, docs/hertz.png (traction against radius, finest level) and both tables into
 docs/verification.md. Runs go to build/hertz/. Usage:
-  .venv/bin/python scripts/hertz.py [--levels coarse medium fine] [--ranks 1 1 2]   (about 30 minutes)
+  .venv/bin/python scripts/hertz.py [--levels coarse medium fine] [--ranks 1 1 2]   (about 60 minutes)
 """
 
 import argparse
