@@ -101,46 +101,54 @@ def _swap_ij(n):
     return np.arange(9 * n * n).reshape(n, 3, n, 3).transpose(0, 3, 2, 1).ravel()
 
 
-def _translate_groups(xe):
-    """Group cells that are exact translates of each other: (index of one cell per shape, shape of each cell)."""
-    rel = xe[:, 1:] - xe[:, :1]
-    scale = np.abs(rel).max()
-    keys = np.rint(rel / (1e-12 * scale if scale > 0 else 1.0)).astype(np.int64).reshape(len(xe), -1)
+def congruent_groups(xe, lmbda, mu):
+    """Group cells (m, n, 3) that are translates of one another and have the same lmbda, mu (m,) [Pa].
+
+    Returns (first, group): one representative cell per group and the group of every cell. Node
+    offsets from node 0 are rounded to 2^-40 of the power of two just above the cell's extent,
+    and that power is part of the key, so cells share a group only if their offsets agree to
+    ~1e-12 of their size: round-off may split one shape over two groups, never merge two shapes.
+    """
+    m = len(xe)
+    rel = (xe[:, 1:] - xe[:, :1]).reshape(m, -1)
+    _, exponent = np.frexp(np.abs(rel).max(axis=1, initial=0.0))
+    keys = np.empty((m, rel.shape[1] + 3), np.int64)
+    np.rint(rel / np.ldexp(1.0, exponent - 40)[:, None], out=rel)
+    keys[:, :-3] = rel
+    keys[:, -3] = exponent
+    for j, p in ((-2, lmbda), (-1, mu)):      # the bits: equal keys mean equal moduli
+        keys[:, j] = np.ascontiguousarray(np.broadcast_to(np.asarray(p, float), (m,))).view(np.int64)
     # hash rows to one integer (wrapping multiply-add), then verify: a collision falls back to a row-wise unique
     mult = np.random.default_rng(12345).integers(1, 2**62, keys.shape[1], dtype=np.int64)
-    _, first, shape = np.unique(keys @ mult, return_index=True, return_inverse=True)
-    if not (keys == keys[first[shape]]).all():
-        _, first, shape = np.unique(keys, axis=0, return_index=True, return_inverse=True)
-    return first, shape.reshape(-1)
+    _, first, group = np.unique(keys @ mult, return_index=True, return_inverse=True)
+    if not (keys == keys[first[group]]).all():
+        _, first, group = np.unique(keys, axis=0, return_index=True, return_inverse=True)
+    return first, group.reshape(-1)
 
 
-def stiffness(cell_type, xe, lmbda, mu, share_translates=True):
+def stiffness(cell_type, xe, lmbda, mu, share_translates=True, ids=None):
     """Element stiffness matrices (m, 3n, 3n) of cells with node coordinates xe (m, n, 3).
 
-    lmbda, mu: Lame parameters (Pa), scalars or (m,). Cells that are exact translates of one
-    another (to 1e-12 of the largest cell extent) with the same lmbda, mu share one computed K
-    unless share_translates is False. Raises MeshError naming the first (local) cell with det J <= 0.
+    lmbda, mu: Lame parameters (Pa), scalars or (m,). Cells that are translates of one another
+    (congruent_groups) with the same lmbda, mu share one computed K unless share_translates is
+    False. Raises MeshError naming the first cell with det J <= 0: ids[row] (default: its row).
     """
     xe = np.asarray(xe, float)
     m, n = xe.shape[:2]
-    lmbda, mu = (np.broadcast_to(np.asarray(p, float), (m,)) for p in (lmbda, mu))
+    lmbda, mu = (np.ascontiguousarray(np.broadcast_to(np.asarray(p, float), (m,))) for p in (lmbda, mu))
+    ids = np.arange(m) if ids is None else np.asarray(ids)
     K = np.empty((m, 3 * n, 3 * n))
     if share_translates and m > 1:
-        first, group = _translate_groups(xe)
+        first, group = congruent_groups(xe, lmbda, mu)
         if len(first) <= m // 2:
-            # refine shape groups by material, so that K is one gather from the distinct matrices
-            _, lid = np.unique(lmbda, return_inverse=True)
-            _, mid = np.unique(mu, return_inverse=True)
-            key = (group * (lid.max() + 1) + lid) * (mid.max() + 1) + mid
-            _, first, group = np.unique(key, return_index=True, return_inverse=True)
             K_distinct = np.empty((len(first),) + K.shape[1:])
             for s in range(0, len(first), CHUNK):
                 c = first[s:s + CHUNK]
-                _stiffness_into(cell_type, xe[c], lmbda[c], mu[c], K_distinct[s:s + CHUNK], c)
+                _stiffness_into(cell_type, xe[c], lmbda[c], mu[c], K_distinct[s:s + CHUNK], ids[c])
             return np.take(K_distinct, group, axis=0, out=K, mode="clip")  # "raise" would buffer out
     for s in range(0, m, CHUNK):
         c = np.arange(s, min(s + CHUNK, m))
-        _stiffness_into(cell_type, xe[c], lmbda[c], mu[c], K[s:s + CHUNK], c)
+        _stiffness_into(cell_type, xe[c], lmbda[c], mu[c], K[s:s + CHUNK], ids[c])
     return K
 
 

@@ -74,9 +74,7 @@ class Run:
         mesh = self.mesh
         with self.phases("assembly"):
             self.lmbda, self.mu = assembly.cell_materials(mesh, scene)
-            d, o = assembly.vertex_graph_counts(mesh)
-            K = assembly.create_dof_matrix(mesh, d, o)
-            assembly.assemble_stiffness(mesh, K, self.lmbda, self.mu)
+            K = assembly.stiffness_matrix(mesh, self.lmbda, self.mu)
             u = K.createVecRight()
             self.f_ext = assembly.surface_load(mesh, scene, u)
             self.bc_dofs, bc_values, self.bc_per_boundary = assembly.dirichlet_dofs(mesh, scene)

@@ -110,11 +110,32 @@ def test_fast_path_equals_general_path(cell_type):
     which = rng.integers(0, 3, 200)
     xe = shapes[which] + rng.uniform(-1, 1, (200, 1, 3))          # translates of 3 shapes
     lmbda = np.where(rng.random(200) < 0.5, LMBDA, 2 * LMBDA)   # two materials
-    first, _ = el._translate_groups(xe)
+    first, _ = el.congruent_groups(xe, lmbda, np.full(200, MU))
     assert len(first) < 20      # round-off may split a shape in two bins, never merge two shapes
     K_fast = el.stiffness(cell_type, xe, lmbda, MU)
     K_gen = el.stiffness(cell_type, xe, lmbda, MU, share_translates=False)
     assert np.allclose(K_fast, K_gen, rtol=1e-9, atol=1e-9 * np.abs(K_gen).max())
+
+
+def test_congruent_groups_detects_and_never_merges():
+    """Translates of one cell shall share a group; a scaled, rotated or re-materialled copy never."""
+    xe = np.rint(distorted_cells("hex", 1, seed=11)[0] * 2**30) / 2**30    # dyadic: translates stay exact
+
+    theta = 1e-6
+    rot = np.array([[np.cos(theta), -np.sin(theta), 0], [np.sin(theta), np.cos(theta), 0], [0, 0, 1]])
+    cells = np.array([xe, xe + [5.0, -2.0, 7.0], xe + [1024.0, 0, 0], xe * (1 + 1e-9), xe @ rot.T, xe])
+    lmbda = np.array([LMBDA] * 5 + [2 * LMBDA])
+    _, group = el.congruent_groups(cells, lmbda, np.full(6, MU))
+    assert group[0] == group[1] == group[2]
+    assert len(set(group[[0, 3, 4, 5]])) == 4
+    x = np.linspace(0.0, 1.0, 21)                                    # a box of 20^3 hexes: one shape
+    grid = np.stack(np.meshgrid(x, x, x, indexing="ij"), -1)
+    corners = [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0), (0, 0, 1), (1, 0, 1), (1, 1, 1), (0, 1, 1)]
+    box = np.stack([grid[i:i + 20, j:j + 20, k:k + 20] for i, j, k in corners], 3).reshape(-1, 8, 3)
+    first, group = el.congruent_groups(box, LMBDA, MU)
+    assert len(first) <= 8                          # round-off of the grid may split the shape, rarely
+    K = el.stiffness("hex", box, LMBDA, MU, share_translates=False)
+    assert np.allclose(K, K[first[group]], rtol=0, atol=1e-12 * np.abs(K).max())
 
 
 @pytest.mark.parametrize("cell_type", ["hex", "tet"])

@@ -1,0 +1,116 @@
+"""The stiffness matrix built as CSR arrays equals an independent dense assembly on any number of ranks.
+
+Runs serially in the suite and again under mpirun -n 2 and -n 3; assertions use all-reduced values."""
+
+import numpy as np
+import pytest
+from conftest import CONFIGS, all_close
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from qsc_petsc import assembly, elasticity
+from qsc_petsc.mesh import distribute_mesh
+from qsc_petsc.scene import load_scene
+
+TWO_BODIES = ["bodies.1.mesh.rotation=[10.0, 20.0, 30.0]", "bodies.1.material.youngs_modulus=3000.0",
+              "bodies.0.mesh.cells=[3,3,2]", "bodies.1.mesh.cells=[2,3,3]"]
+CASES = {
+    "hex box": ("block_compression.toml", ["bodies.0.mesh.cells=[4,3,5]"], False),
+    "tet box": ("block_compression.toml", ["bodies.0.mesh.cells=[3,2,3]", "bodies.0.mesh.element=tet"], False),
+    "hex distorted": ("block_compression.toml", ["bodies.0.mesh.cells=[4,3,5]"], True),
+    "tet distorted": ("block_compression.toml", ["bodies.0.mesh.cells=[3,2,3]", "bodies.0.mesh.element=tet"], True),
+    "hex two bodies, one rotated": ("two_cubes_dies.toml", TWO_BODIES, False),
+    "tet two bodies, distorted": ("two_cubes_dies.toml", TWO_BODIES + ["bodies.0.mesh.element=tet",
+                                                                       "bodies.1.mesh.element=tet"], True),
+}
+
+
+def distort(x):
+    """A smooth map of the coordinates: every rank moves a shared vertex the same way, no cell stays a translate."""
+    return x + 0.04 * np.sin(np.column_stack([3 * x[:, 1] + 2 * x[:, 2], 4 * x[:, 2] + x[:, 0], 5 * x[:, 0]]))
+
+
+def dense_reference(mesh, lmbda, mu):
+    """The global stiffness as a dense array, summed element by element (all ranks get it)."""
+    n = 3 * mesh.n_vertices
+    K = np.zeros((n, n))
+    Ke = elasticity.stiffness(mesh.cell_type, mesh.coords[mesh.cells], lmbda, mu, share_translates=False)
+    dofs = (3 * mesh.gvert[mesh.cells][:, :, None] + np.arange(3)).reshape(len(Ke), -1)
+    for d, ke in zip(dofs, Ke):
+        K[np.ix_(d, d)] += ke
+    mesh.comm.Allreduce(MPI.IN_PLACE, K, op=MPI.SUM)
+    return K
+
+
+def vertex_pairs(mesh):
+    """Number of ordered pairs of vertices (a vertex with itself included) that share a cell."""
+    shared = np.zeros((mesh.n_vertices, mesh.n_vertices), np.int32)
+    g = mesh.gvert[mesh.cells]
+    shared[g[:, :, None], g[:, None, :]] = 1
+    mesh.comm.Allreduce(MPI.IN_PLACE, shared, op=MPI.MAX)
+    return int(shared.sum())
+
+
+def owned_dense(A, n):
+    """This rank's rows of a PETSc matrix as a dense array, and their first global row."""
+    r0, r1 = A.getOwnershipRange()
+    indptr, cols, vals = A.getValuesCSR()
+    rows = np.zeros((r1 - r0, n))
+    rows[np.repeat(np.arange(r1 - r0), np.diff(indptr)), cols] = vals
+    return rows, r0
+
+
+@pytest.mark.parametrize("case", CASES)
+def test_stiffness_matrix_equals_dense_assembly(comm, case):
+    """The CSR-built stiffness shall equal the element-by-element sum to round-off, with exact preallocation."""
+    scene_file, sets, distorted = CASES[case]
+    scene = load_scene(CONFIGS / scene_file, sets)
+    mesh = distribute_mesh(scene, comm)
+    if distorted:
+        mesh.coords = distort(mesh.coords)
+    lmbda, mu = assembly.cell_materials(mesh, scene)
+    A = assembly.stiffness_matrix(mesh, lmbda, mu)
+    K = dense_reference(mesh, lmbda, mu)
+    rows, r0 = owned_dense(A, len(K))
+    ref = K[r0:r0 + len(rows)]
+    err = comm.allreduce(float(np.abs(rows - ref).max(initial=0.0)), op=MPI.MAX)
+    assert err <= 1e-13 * np.abs(K).max()
+    # exact pattern: the 3x3 blocks of the vertex pairs that share a cell, no more
+    stored = comm.allreduce(int(A.getValuesCSR()[0][-1]), op=MPI.SUM)
+    assert stored == 9 * vertex_pairs(mesh)
+    assert A.getBlockSize() == 3
+    assert A.getSize() == K.shape
+    A.destroy()
+
+
+def test_pattern_is_closed(comm):
+    """A value outside the pattern shall be refused on every rank (no silent reallocation)."""
+    scene = load_scene(CONFIGS / "block_compression.toml", ["bodies.0.mesh.cells=[4,3,5]"])
+    mesh = distribute_mesh(scene, comm)
+    A = assembly.stiffness_matrix(mesh, *assembly.cell_materials(mesh, scene))
+    r0 = A.getOwnershipRange()[0]
+    far = (r0 + A.getSize()[1] // 2 + 40) % A.getSize()[1]     # no vertex shares a cell with one half a box away
+    indptr, cols, _ = A.getValuesCSR()
+    assert far not in cols[:indptr[1]]
+    refused = False
+    try:
+        A.setValue(r0, far, 1.0, addv=PETSc.InsertMode.ADD_VALUES)
+    except PETSc.Error:
+        refused = True
+    assert all_close(comm, refused)
+    A.destroy()
+
+
+def test_degenerate_cell_fails_every_rank(comm):
+    """A cell with det J <= 0 on one rank shall raise MeshError on all ranks, naming the cell."""
+    from qsc_petsc.errors import MeshError
+    scene = load_scene(CONFIGS / "block_compression.toml", ["bodies.0.mesh.cells=[4,3,5]"])
+    mesh = distribute_mesh(scene, comm)
+    bad = comm.allreduce(int(mesh.cell_orig.min(initial=10**9)) if comm.rank == comm.size - 1 else 10**9, op=MPI.MIN)
+    mine = np.flatnonzero(mesh.cell_orig == bad)
+    if len(mine):                                   # flatten one cell: every node onto node 0's plane z
+        v = mesh.cells[mine[0]]
+        mesh.coords = mesh.coords.copy()
+        mesh.coords[v[4:], 2] = mesh.coords[v[0], 2]
+    with pytest.raises(MeshError, match=f"hex cell {bad} "):
+        assembly.stiffness_matrix(mesh, *assembly.cell_materials(mesh, scene))
