@@ -1,14 +1,20 @@
-"""The contact-band preconditioner: GAMG composed with an exact solve on the band of dofs the contact rows couple.
+"""The contact-band preconditioner: algebraic multigrid composed with an exact solve on the band of dofs the contact rows couple.
 
 Penalty rows between bodies add eps_n G^T D G, a coupling 1e2-1e6 times stiffer than the elements
-around it and not diagonal (a slave node against a master face): GAMG's aggregates and smoothers
-do not see it, and CG + GAMG needed 9-11x the iterations of the same mesh merged into one body
-(docs/performance.md). Composing GAMG multiplicatively with a sparse Cholesky on the rows the
-contact stencil touches (plus `layers` rings of element neighbours) removes that stiff part
-exactly: the band is two-dimensional, so its factor is cheap next to the 3-D solve.
+around it and not diagonal (a slave node against a master face): multigrid's coarse spaces and
+smoothers do not resolve it, and CG + GAMG needed 9-11x the iterations of the same mesh merged into
+one body (docs/performance.md). Composing the multigrid multiplicatively with a sparse Cholesky on
+the rows the contact stencil touches (plus `layers` rings of element neighbours) removes that stiff
+part exactly: the band is two-dimensional, so its factor is cheap next to the 3-D solve.
 
-Options (prefix qsc_): the composite's GAMG is `qsc_sub_0_`, the band's ASM `qsc_sub_1_` (its
-factor: `qsc_sub_1_sub_pc_type`, default cholesky with MUMPS).
+The multigrid is hypre's BoomerAMG unless `-qsc_pc_type` names another (gamg): its classical
+coarsening follows the strong penalty couplings across the interface, and with the band it needs
+1.4-1.6x the iterations of the merged body where GAMG with the band needs 2-3x (measured: see
+docs/performance.md). Its settings (HMIS coarsening, ext+i interpolation, at most 4 weights per row,
+strength threshold 0.5: the usual 3-D elasticity choices, a third cheaper per cycle than hypre's
+defaults at the same iteration count) are defaults any `-qsc_pc_hypre_*` option overrides. The
+multigrid reads the system's own options (`-qsc_pc_*`), the band's ASM `-qsc_sub_1_*` (its factor:
+`-qsc_sub_1_sub_pc_type`, default cholesky with MUMPS).
 """
 
 import numpy as np
@@ -16,8 +22,11 @@ from petsc4py import PETSc
 
 from .options import set_from_options
 
+AMG_TYPES = ("hypre", "gamg")        # the band's partner: the first is the default
 DEFAULTS = {"sub_1_sub_pc_type": "cholesky", "sub_1_sub_pc_factor_mat_solver_type": "mumps",
             "sub_1_sub_ksp_type": "preonly"}
+HYPRE_DEFAULTS = {"pc_hypre_boomeramg_coarsen_type": "HMIS", "pc_hypre_boomeramg_interp_type": "ext+i",
+                  "pc_hypre_boomeramg_P_max": "4", "pc_hypre_boomeramg_strong_threshold": "0.5"}
 
 
 def band_dofs(K, couplings, layers=1):
@@ -51,22 +60,27 @@ def effective_option(name, default=None):
     return PETSc.Options().getString("qsc_" + name, default)
 
 
+def amg_type():
+    """The band's partner: the preconditioner type the options name, else BoomerAMG."""
+    return effective_option("pc_type", AMG_TYPES[0])
+
+
 def wants_band(mode, has_pairs):
-    """Whether to use the band preconditioner: mode "band" always (with contact pairs), "auto" when the
-    options choose GAMG (the default), "none" never."""
+    """Whether to use the band preconditioner: mode "band" always (with contact pairs), "auto" unless the
+    options name a preconditioner other than an algebraic multigrid (hypre, gamg), "none" never."""
     if not has_pairs or mode == "none":
         return False
-    return mode == "band" or effective_option("pc_type", "gamg") == "gamg"
+    return mode == "band" or amg_type() in AMG_TYPES
 
 
 def install_band_pc(ksp, K, couplings, layers, comm):
-    """Give ksp a fresh composite PC: GAMG, then ASM with one subdomain per rank = its contact band.
+    """Give ksp a fresh composite PC: the multigrid, then ASM with one subdomain per rank = its contact band.
 
     Symmetric-multiplicative (so CG stays valid) when the KSP is CG, multiplicative otherwise.
     Returns the global number of band dofs. A fresh PC per search: ASM subdomains are fixed at setup."""
     band = band_dofs(K, couplings, layers)
     opts = PETSc.Options()
-    for key, value in DEFAULTS.items():
+    for key, value in (DEFAULTS | (HYPRE_DEFAULTS if amg_type() == "hypre" else {})).items():
         if not opts.hasName("qsc_" + key):
             opts.setValue("qsc_" + key, value)
     pc = PETSc.PC().create(comm=comm)
@@ -75,13 +89,14 @@ def install_band_pc(ksp, K, couplings, layers, comm):
     symmetric = (effective_option("ksp_type", "cg") == "cg")
     pc.setCompositeType(PETSc.PC.CompositeType.SYMMETRIC_MULTIPLICATIVE if symmetric
                         else PETSc.PC.CompositeType.MULTIPLICATIVE)
-    pc.addCompositePCType("gamg")
+    pc.addCompositePCType(amg_type())
     pc.addCompositePCType("asm")
-    gamg, asm = pc.getCompositePC(0), pc.getCompositePC(1)
+    amg, asm = pc.getCompositePC(0), pc.getCompositePC(1)
+    amg.setOptionsPrefix("qsc_")         # -qsc_pc_hypre_* / -qsc_pc_gamg_* tune it as they tune a plain PC
     sub = PETSc.IS().createGeneral(band, comm=PETSc.COMM_SELF)
     asm.setASMLocalSubdomains(1, [sub], [sub])
     asm.setASMType(PETSc.PC.ASMType.BASIC)
-    set_from_options(gamg, "contact band's GAMG (-qsc_sub_0_*)")
+    set_from_options(amg, "contact band's multigrid (-qsc_pc_*)")
     set_from_options(asm, "contact band's ASM (-qsc_sub_1_*)")
     ksp.setPC(pc)
     sub.destroy()

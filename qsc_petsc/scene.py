@@ -502,15 +502,17 @@ SCHEMA = Table({
                                          default=60),
         "active_set_tolerance": Float("Relative closed-set tolerance on the constraint rows.", gt=0, default=1e-12),
         "contact_preconditioner": Choice(("auto", "band", "none"),
-                                         "Linear solves with contact pairs: \"band\" composes GAMG with an exact "
-                                         "solve on the contact band (options qsc_sub_0_*, qsc_sub_1_*); \"auto\" "
-                                         "does so when the PC is GAMG; \"none\" uses the PETSc options as given.",
+                                         "Linear solves with contact pairs: \"auto\" composes an algebraic "
+                                         "multigrid (BoomerAMG unless pc_type names gamg) with an exact solve on the "
+                                         "contact band when pc_type is unset, hypre or gamg; \"band\" composes "
+                                         "whatever pc_type names; \"none\" uses the options as given (GAMG when "
+                                         "pc_type is unset). Without contact pairs the default PC is GAMG.",
                                          default="auto"),
         "contact_band_layers": Int("Rings of element neighbours added to the contact rows' dofs in the band.",
                                    ge=0, le=5, default=1),
     }, "Nonlinear solver controls."),
     "petsc": Options(f"PETSc options without the {OPTIONS_PREFIX!r} prefix, nested tables joined by \"_\"; "
-                     "merged over the defaults.", default={"ksp_type": "cg", "pc_type": "gamg", "ksp_rtol": "1e-10"}),
+                     "merged over the defaults.", default={"ksp_type": "cg", "ksp_rtol": "1e-10"}),
     "output": Table({
         "directory": Str("Output folder; {name} is the scene name; relative to the working directory.",
                          default="results/{name}"),
