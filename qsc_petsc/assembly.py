@@ -332,7 +332,7 @@ def rigid_body_modes(mesh, template):
     rows = (3 * mesh.gvert[owned_v] - template.getOwnershipRange()[0]).astype(np.int64)
     for b in range(len(mesh.body_names)):
         in_body = np.zeros(len(mesh.coords), dtype=bool)
-        in_body[mesh.body_vertices(b)] = True
+        in_body[mesh.cells[mesh.cell_body == b]] = True          # a mask needs no sorted vertex list
         sel = in_body[owned_v]
         x = mesh.coords[owned_v[sel]]
         r = rows[sel]

@@ -110,7 +110,7 @@ def congruent_groups(xe, lmbda, mu):
     ~1e-12 of their size: round-off may split one shape over two groups, never merge two shapes.
     """
     m = len(xe)
-    rel = (xe[:, 1:] - xe[:, :1]).reshape(m, -1)
+    rel = (xe[:, 1:] - xe[:, :1]).reshape(m, 3 * (xe.shape[1] - 1))
     _, exponent = np.frexp(np.abs(rel).max(axis=1, initial=0.0))
     keys = np.empty((m, rel.shape[1] + 3), np.int64)
     np.rint(rel / np.ldexp(1.0, exponent - 40)[:, None], out=rel)

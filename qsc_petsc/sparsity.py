@@ -1,11 +1,12 @@
-"""Vertex-block sparsity of a cell mesh and the summing of element blocks into it: pure NumPy.
+"""Vertex-block sparsity of a cell mesh: the exact CSR pattern, which element blocks sum into which matrix
+block, and where blocks land in a point CSR split at the diagonal columns. Pure NumPy.
 
 A row is a vertex and holds one 3x3 block per vertex it shares a cell with. For every row the
 *candidates* are the k vertices of each of its cells ("cell entries" e = cell * k + slot), plus
 optional extra columns (blocks that other ranks will add). Sorting each row's candidates by
 column gives at once the distinct columns (the CSR pattern) and, run by run, which element
-blocks sum into which matrix block, so values are summed by a segmented reduction instead of a
-scatter with collisions.
+blocks sum into which matrix block, so values can be summed segment by segment (assembly.py does
+it as one sparse-dense product) instead of by a scatter with collisions.
 """
 
 from dataclasses import dataclass
@@ -13,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 ROW_BATCH = 1 << 20        # candidates sorted per batch: bounds the temporaries (~10 MB each)
+MIN_RUN = 4                # rows: shorter runs of equal rows go value by value
 
 
 @dataclass
@@ -155,9 +157,6 @@ def row_batches(cptr, size):
     cuts = np.searchsorted(cptr, np.arange(0, cptr[-1], size), side="right") - 1
     cuts = np.unique(np.concatenate([[0], cuts, [len(cptr) - 1]]))
     return list(zip(cuts[:-1].tolist(), cuts[1:].tolist()))
-
-
-MIN_RUN = 4                # rows: shorter runs of equal rows go value by value
 
 
 def equal_runs(nb, plain, offset=0):

@@ -15,6 +15,7 @@ from qsc_petsc.scene import load_scene
 TWO_BODIES = ["bodies.1.mesh.rotation=[10.0, 20.0, 30.0]", "bodies.1.material.youngs_modulus=3000.0",
               "bodies.0.mesh.cells=[3,3,2]", "bodies.1.mesh.cells=[2,3,3]"]
 CASES = {
+    "hex two cells, a rank may hold none": ("block_compression.toml", ["bodies.0.mesh.cells=[1,1,2]"], False),
     "hex box": ("block_compression.toml", ["bodies.0.mesh.cells=[4,3,5]"], False),
     "tet box": ("block_compression.toml", ["bodies.0.mesh.cells=[3,2,3]", "bodies.0.mesh.element=tet"], False),
     "hex distorted": ("block_compression.toml", ["bodies.0.mesh.cells=[4,3,5]"], True),
@@ -35,7 +36,7 @@ def dense_reference(mesh, lmbda, mu):
     n = 3 * mesh.n_vertices
     K = np.zeros((n, n))
     Ke = elasticity.stiffness(mesh.cell_type, mesh.coords[mesh.cells], lmbda, mu, share_translates=False)
-    dofs = (3 * mesh.gvert[mesh.cells][:, :, None] + np.arange(3)).reshape(len(Ke), -1)
+    dofs = (3 * mesh.gvert[mesh.cells][:, :, None] + np.arange(3)).reshape(len(Ke), 3 * mesh.cells.shape[1])
     for d, ke in zip(dofs, Ke):
         K[np.ix_(d, d)] += ke
     mesh.comm.Allreduce(MPI.IN_PLACE, K, op=MPI.SUM)
