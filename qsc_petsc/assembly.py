@@ -88,7 +88,8 @@ def stiffness_matrix(mesh, lmbda, mu):
 
     def local_sums():
         groups = elasticity.congruent_groups(mesh.coords[mesh.cells], lmbda, mu)
-        vals, cols = _owned_sums(mesh, pattern, entries, layout, groups, lmbda, mu)
+        last = _last_rows(cell_rows, groups[1], len(groups[0]), o0)
+        vals, cols = _owned_sums(mesh, pattern, entries, layout, groups, lmbda, mu, last)
         return vals, cols, _row_sums(mesh, ghost_pat, entries, groups, lmbda, mu)
     vals, cols, ghost_vals = on_all(comm, local_sums)       # a degenerate cell fails every rank
     received = send_to_owners(comm, starts, ghost_row, ghost_col, *ghost_vals.reshape(-1, 9).T)
@@ -119,7 +120,7 @@ def _row_sums(mesh, pattern, entries, groups, lmbda, mu):
     return out
 
 
-def _owned_sums(mesh, pattern, entries, layout, groups, lmbda, mu):
+def _owned_sums(mesh, pattern, entries, layout, groups, lmbda, mu, last):
     """Split CSR values and point columns of the owned rows: (vals, cols) in one array each.
 
     Consecutive rows with the same number of blocks, all in the diagonal part, are copied as one
@@ -130,8 +131,9 @@ def _owned_sums(mesh, pattern, entries, layout, groups, lmbda, mu):
     v0 = mesh.vertex_range[0]
     nb = np.diff(pattern.rowptr)
     plain = (n_diag == nb) & (n_left == 0)
+    cache = _KernelCache(mesh, groups, lmbda, mu, last)
     for r0, r1 in sparsity.row_batches(pattern.cptr, BATCH):
-        V = _batch_sums(mesh, pattern, entries, r0, r1, groups, lmbda, mu)        # (blocks of the batch, 9)
+        V = _batch_sums(mesh, pattern, entries, r0, r1, groups, lmbda, mu, cache)        # (blocks of the batch, 9)
         q0 = pattern.rowptr[r0]
         for a, b in sparsity.equal_runs(nb[r0:r1], plain[r0:r1], r0):
             p0, p1, w = pattern.rowptr[a], pattern.rowptr[b], nb[a]
@@ -151,13 +153,12 @@ def _owned_sums(mesh, pattern, entries, layout, groups, lmbda, mu):
     return vals, cols
 
 
-def _batch_sums(mesh, pattern, entries, r0, r1, groups, lmbda, mu):
+def _batch_sums(mesh, pattern, entries, r0, r1, groups, lmbda, mu, cache=None):
     """Summed element blocks (nb, 9) of the blocks of rows r0:r1 (row-major 3x3), kernels run once per
-    congruent group.
+    congruent group (and, with a _KernelCache, once per run of batches needing it).
 
-    The segmented sum is a sparse-dense product
-    S T in PETSc (S: one row per block, a 1 per candidate at its element block's row of table T):
-    about 4x faster than NumPy's reduceat on 3x3 blocks."""
+    The segmented sum is a sparse-dense product S T in PETSc (S: one row per block, a 1 per
+    candidate at its element block's row of table T): about 4x faster than NumPy's reduceat."""
     first, group = groups
     k = mesh.cells.shape[1]
     kk = k * k
@@ -174,19 +175,54 @@ def _batch_sums(mesh, pattern, entries, r0, r1, groups, lmbda, mu):
     reps = np.flatnonzero(need)
     slot = np.zeros(len(first), np.int64)
     slot[reps] = np.arange(len(reps))
-    c = first[reps]
-    Ke = elasticity.stiffness(mesh.cell_type, mesh.coords[mesh.cells[c]], lmbda[c], mu[c],
-                              share_translates=False, ids=mesh.cell_orig[c])
-    table = np.zeros((len(reps) * kk + 1, 9), order="F")    # the last block is the zero of extra columns
-    table[:-1] = Ke.reshape(-1, k, 3, k, 3).transpose(0, 1, 3, 2, 4).reshape(-1, 9)
+    # T channel by channel (PETSc's dense matrices are column-major); its last row is the zero of extra columns
+    table = np.zeros((9, len(reps) * kk + 1))
+    (cache or _KernelCache(mesh, groups, lmbda, mu)).fill(table[:, :-1].reshape(9, len(reps), kk), reps, r1)
     ids = np.where(src >= 0, slot[g] * kk + (entry - cell * k) * k + src % k, len(reps) * kk).astype(PETSc.IntType)
     indptr = np.append(pattern.first[p0:p1] - c0, c1 - c0).astype(PETSc.IntType)
-    S = PETSc.Mat().createAIJWithArrays((p1 - p0, len(table)), (indptr, ids, np.ones(len(ids))), comm=PETSc.COMM_SELF)
-    T = PETSc.Mat().createDense(table.shape, array=table, comm=PETSc.COMM_SELF)
+    S = PETSc.Mat().createAIJWithArrays((p1 - p0, table.shape[1]), (indptr, ids, np.ones(len(ids))),
+                                        comm=PETSc.COMM_SELF)
+    T = PETSc.Mat().createDense(table.T.shape, array=table.T, comm=PETSc.COMM_SELF)
     Y = S.matMult(T)
     out = np.ascontiguousarray(Y.getDenseArray())          # PETSc's dense matrices are column-major
     for m in (Y, T, S):
         m.destroy()
+    return out
+
+
+class _KernelCache:
+    """Element blocks of congruent groups, channel by channel (9, groups, kk), kept from one row batch to
+    the next while a later batch still needs them: batches of consecutive rows share the cells between them.
+
+    last[g]: the last pattern row whose batch needs group g (None: keep nothing)."""
+
+    def __init__(self, mesh, groups, lmbda, mu, last=None):
+        self.mesh, self.groups, self.lmbda, self.mu, self.last = mesh, groups, lmbda, mu, last
+        k = mesh.cells.shape[1]
+        self.ids, self.kept = np.zeros(0, np.int64), np.zeros((9, 0, k * k))
+
+    def fill(self, out, reps, r1):
+        """Write the blocks of the (ascending) groups reps into out (9, len(reps), kk), for a batch ending at row r1."""
+        mesh, k = self.mesh, self.mesh.cells.shape[1]
+        hit = np.isin(reps, self.ids, assume_unique=True)
+        out[:, hit] = self.kept[:, np.searchsorted(self.ids, reps[hit])]
+        c = self.groups[0][reps[~hit]]
+        Ke = elasticity.stiffness(mesh.cell_type, mesh.coords[mesh.cells[c]], self.lmbda[c], self.mu[c],
+                                  share_translates=False, ids=mesh.cell_orig[c])
+        out[:, ~hit] = Ke.reshape(-1, k, 3, k, 3).transpose(2, 4, 0, 1, 3).reshape(9, -1, k * k)
+        if self.last is not None:
+            keep = self.last[reps] >= r1
+            self.ids, self.kept = reps[keep], out[:, keep]
+
+
+def _last_rows(cell_rows, group, n_groups, offset):
+    """Per group, the last row (minus offset) of any of its cells: until then a batch may need it."""
+    last = cell_rows.max(axis=1, initial=0) - offset if len(cell_rows) else np.zeros(0, np.int64)
+    order = np.lexsort((last, group))                # by group, then row: a group's maximum ends its run
+    g = group[order]
+    end = np.flatnonzero(np.r_[g[1:] != g[:-1], True]) if len(g) else np.zeros(0, np.int64)
+    out = np.full(n_groups, -1, np.int64)
+    out[g[end]] = last[order][end]
     return out
 
 

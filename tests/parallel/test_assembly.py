@@ -8,7 +8,7 @@ from conftest import CONFIGS, all_close
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from qsc_petsc import assembly, elasticity
+from qsc_petsc import assembly, elasticity, sparsity
 from qsc_petsc.mesh import distribute_mesh
 from qsc_petsc.scene import load_scene
 
@@ -62,8 +62,12 @@ def owned_dense(A, n):
 
 
 @pytest.mark.parametrize("case", CASES)
-def test_stiffness_matrix_equals_dense_assembly(comm, case):
-    """The CSR-built stiffness shall equal the element-by-element sum to round-off, with exact preallocation."""
+@pytest.mark.parametrize("batch", [1 << 19, 200])
+def test_stiffness_matrix_equals_dense_assembly(comm, monkeypatch, case, batch):
+    """The CSR-built stiffness shall equal the element-by-element sum to round-off, with exact preallocation,
+    in one batch of rows or in many (kernels kept between batches, rows sorted in several passes)."""
+    monkeypatch.setattr(assembly, "BATCH", batch)
+    monkeypatch.setattr(sparsity, "ROW_BATCH", min(batch, sparsity.ROW_BATCH))
     scene_file, sets, distorted = CASES[case]
     scene = load_scene(CONFIGS / scene_file, sets)
     mesh = distribute_mesh(scene, comm)
