@@ -7,6 +7,7 @@ Writes the table into docs/performance.md. Usage:
 """
 
 import argparse
+import os
 
 from benchlib import ROOT, add_docs_args, run, write_table
 
@@ -55,6 +56,11 @@ def scene(n, formulation):
             + DIES.format(bottom="lower.zmin", top="upper.zmax") + PAIR.format(formulation=formulation) + LOAD)
 
 
+def load():
+    """The 1, 5 and 15 minute load averages of this machine: timings are only comparable on a quiet one."""
+    return "load average {:.2f} / {:.2f} / {:.2f} on {} cores".format(*os.getloadavg(), os.cpu_count())
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--cells", type=int, nargs="+", default=[17, 25, 39])
@@ -62,25 +68,32 @@ def main():
     ap.add_argument("--formulations", nargs="+", default=["merged", "master_slave", "two_pass", "quasi_symmetric"])
     add_docs_args(ap, "Contact: two cubes between rigid dies")
     args = ap.parse_args()
-    rows = []
+    rows, loads = [], [load()]
     for n in args.cells:
         for r in args.ranks:
+            merged = None
             for f in args.formulations:
                 s, _ = run(scene(n, f), r, args.petsc.split())
                 t = s["time"]
                 total = sum(t.values())
+                merged = total if f == "merged" else merged
+                ratio = f"{total / merged:.2f}" if merged else "-"
                 rows.append(f"| {s['mesh']['dofs']} | {r} | {f} | {t.get('search', 0):.2f} | {t.get('rows', 0):.2f} | "
-                            f"{t['assembly']:.2f} | {t['solve']:.2f} | {total:.2f} | "
+                            f"{t['assembly']:.2f} | {t['solve']:.2f} | {total:.2f} | {ratio} | "
                             f"{sum(x['snes_iterations'] for x in s['steps'])} | "
                             f"{sum(x['ksp_iterations'] for x in s['steps'])} | {s['peak_memory_mib']['total']:.0f} |")
                 print(rows[-1], flush=True)
+    loads.append(load())
+    defaults = ("defaults: CG; GAMG for the merged body, BoomerAMG composed with the exact solve on the contact band "
+                "with contact pairs")
     description = ("two unit cubes, upper mesh 1.5x finer, sticking rigid dies, top die down 1 % of the height in "
-                   f"2 load steps, alpha = 1e4, PETSc options: `{args.petsc or '(defaults: CG + GAMG)'}`; `merged` = "
+                   f"2 load steps, alpha = 1e4, PETSc options: `{args.petsc or defaults}`; `merged` = "
                    "the same 1 x 1 x 2 stack meshed as one conforming body with about the same number of dofs. "
-                   "Seconds, max over ranks; solve includes the residual/Jacobian contact products; "
-                   "memory = peak resident set over all ranks, MiB")
+                   "Seconds, max over ranks; total = the sum of the phases; x merged = total / the merged body's "
+                   "total; solve includes the residual/Jacobian contact products; memory = peak resident set over "
+                   f"all ranks, MiB; {loads[0]} before, {loads[1]} after)")
     write_table(ROOT / "docs" / "performance.md", args.title, "bench_contact.py", description,
-                ["dofs", "ranks", "formulation", "search", "rows", "assembly", "solve", "total", "Newton its",
+                ["dofs", "ranks", "formulation", "search", "rows", "assembly", "solve", "total", "x merged", "Newton its",
                  "KSP its", "mem total"], rows)
 
 
