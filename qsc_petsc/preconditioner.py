@@ -7,14 +7,16 @@ one body (docs/performance.md). Composing the multigrid multiplicatively with a 
 the rows the contact stencil touches (plus `layers` rings of element neighbours) removes that stiff
 part exactly: the band is two-dimensional, so its factor is cheap next to the 3-D solve.
 
-The multigrid is hypre's BoomerAMG unless `-qsc_pc_type` names another (gamg): its classical
-coarsening follows the strong penalty couplings across the interface, and with the band it needs
-1.4-1.6x the iterations of the merged body where GAMG with the band needs 2-3x (measured: see
-docs/performance.md). Its settings (HMIS coarsening, ext+i interpolation, at most 4 weights per row,
-strength threshold 0.5: the usual 3-D elasticity choices, a third cheaper per cycle than hypre's
-defaults at the same iteration count) are defaults any `-qsc_pc_hypre_*` option overrides. The
-multigrid reads the system's own options (`-qsc_pc_*`), the band's ASM `-qsc_sub_1_*` (its factor:
-`-qsc_sub_1_sub_pc_type`, default cholesky with MUMPS).
+The multigrid is hypre's BoomerAMG unless `-qsc_pc_type` names another (gamg), and the Krylov method
+GMRES unless `-qsc_ksp_type` names one. BoomerAMG's classical coarsening follows the strong penalty
+couplings across the interface: on the two cubes (70k dofs), CG with the band needed 17 iterations
+per Newton step with BoomerAMG and 54-79 with GAMG (docs/performance.md).
+GMRES takes the multiplicative composite, one V-cycle per iteration; CG needs the symmetric one, two.
+BoomerAMG's settings (HMIS coarsening, ext+i interpolation, at most 4 weights per row, strength
+threshold 0.5, one level of aggressive coarsening: the usual 3-D elasticity choices; under CG also
+l1-scaled smoothing) are defaults that any `-qsc_pc_hypre_*` option overrides. The multigrid reads the system's own
+options (`-qsc_pc_*`), the band's ASM `-qsc_sub_1_*` (its factor: `-qsc_sub_1_sub_pc_type`, default
+cholesky with MUMPS).
 """
 
 import numpy as np
@@ -25,8 +27,16 @@ from .options import set_from_options
 AMG_TYPES = ("hypre", "gamg")        # the band's partner: the first is the default
 DEFAULTS = {"sub_1_sub_pc_type": "cholesky", "sub_1_sub_pc_factor_mat_solver_type": "mumps",
             "sub_1_sub_ksp_type": "preonly"}
+# BoomerAMG: cheaper V-cycles than hypre's defaults (about half the operator complexity, measured) at the
+# same or a slightly larger iteration count.
 HYPRE_DEFAULTS = {"pc_hypre_boomeramg_coarsen_type": "HMIS", "pc_hypre_boomeramg_interp_type": "ext+i",
-                  "pc_hypre_boomeramg_P_max": "4", "pc_hypre_boomeramg_strong_threshold": "0.5"}
+                  "pc_hypre_boomeramg_P_max": "4", "pc_hypre_boomeramg_strong_threshold": "0.5",
+                  "pc_hypre_boomeramg_agg_nl": "1"}
+# Under CG, l1-scaled smoothing: hypre's hybrid Gauss-Seidel is Jacobi between ranks, which need not
+# converge where penalty rows couple across them (plain CG + BoomerAMG stopped with an indefinite
+# preconditioner on 3 ranks, patch test); GMRES runs 12 % faster without it (measured).
+CG_HYPRE_DEFAULTS = {"pc_hypre_boomeramg_relax_type_all": "l1scaled-SOR/Jacobi"}
+GMRES_RESTART = 100        # above the iteration counts measured (docs/performance.md): no restarts
 
 
 def band_dofs(K, couplings, layers=1):
@@ -57,7 +67,8 @@ def band_dofs(K, couplings, layers=1):
 
 def effective_option(name, default=None):
     """The value of option qsc_<name> in the database, or default."""
-    return PETSc.Options().getString("qsc_" + name, default)
+    opts = PETSc.Options()
+    return opts.getString("qsc_" + name) if opts.hasName("qsc_" + name) else default
 
 
 def amg_type():
@@ -76,18 +87,26 @@ def wants_band(mode, has_pairs):
 def install_band_pc(ksp, K, couplings, layers, comm):
     """Give ksp a fresh composite PC: the multigrid, then ASM with one subdomain per rank = its contact band.
 
-    Symmetric-multiplicative (so CG stays valid) when the KSP is CG, multiplicative otherwise.
-    Returns the global number of band dofs. A fresh PC per search: ASM subdomains are fixed at setup."""
+    When the options name no KSP, it becomes GMRES (right-preconditioned, as the true-residual test
+    needs) with the multiplicative composite, one V-cycle per iteration; a named CG gets the
+    symmetric-multiplicative one (so CG stays valid, at two V-cycles per iteration), any other KSP the
+    multiplicative one. Returns the global number of band dofs. A fresh PC per search: ASM subdomains are fixed at setup."""
     band = band_dofs(K, couplings, layers)
+    krylov = effective_option("ksp_type")
+    hypre = HYPRE_DEFAULTS | (CG_HYPRE_DEFAULTS if krylov == "cg" else {}) if amg_type() == "hypre" else {}
     opts = PETSc.Options()
-    for key, value in (DEFAULTS | (HYPRE_DEFAULTS if amg_type() == "hypre" else {})).items():
+    added = []                          # multigrid defaults: read once below, then removed (see the end)
+    for key, value in (DEFAULTS | hypre).items():
         if not opts.hasName("qsc_" + key):
             opts.setValue("qsc_" + key, value)
+            added += [key] if key in hypre else []
     pc = PETSc.PC().create(comm=comm)
     pc.setOptionsPrefix("qsc_")
     pc.setType("composite")
-    symmetric = (effective_option("ksp_type", "cg") == "cg")
-    pc.setCompositeType(PETSc.PC.CompositeType.SYMMETRIC_MULTIPLICATIVE if symmetric
+    if krylov is None:
+        ksp.setType("gmres")             # one V-cycle per iteration (CG needs the symmetric form: two)
+        ksp.setGMRESRestart(GMRES_RESTART)
+    pc.setCompositeType(PETSc.PC.CompositeType.SYMMETRIC_MULTIPLICATIVE if krylov == "cg"
                         else PETSc.PC.CompositeType.MULTIPLICATIVE)
     pc.addCompositePCType(amg_type())
     pc.addCompositePCType("asm")
@@ -98,6 +117,8 @@ def install_band_pc(ksp, K, couplings, layers, comm):
     asm.setASMType(PETSc.PC.ASMType.BASIC)
     set_from_options(amg, "contact band's multigrid (-qsc_pc_*)")
     set_from_options(asm, "contact band's ASM (-qsc_sub_1_*)")
+    for key in added:                   # BoomerAMG has read them; the next solve (maybe CG) decides afresh
+        opts.delValue("qsc_" + key)
     ksp.setPC(pc)
     sub.destroy()
     return comm.allreduce(len(band))

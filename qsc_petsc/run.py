@@ -69,6 +69,14 @@ class Run:
         self.phases = Phases(comm)
         self.out = prepare_output(scene, out_dir, comm)
         self.from_scene = options.insert_scene_options(scene.petsc)
+        try:
+            self._build(scene, comm)
+        except BaseException:
+            options.remove_options(self.from_scene)   # a failed set-up leaks no options to the next run
+            raise
+
+    def _build(self, scene, comm):
+        """Mesh, operators, solver, contact model and output writer, in that order."""
         with self.phases("mesh"):
             self.mesh = distribute_mesh(scene, comm)
         mesh = self.mesh
@@ -159,6 +167,14 @@ class Run:
             write_json(self.out / "summary.json", self.summary)
 
     def execute(self):
+        """Run every load step and return the summary; the scene's PETSc options leave the database when it
+        ends, failed or not (an in-process caller's next run must not inherit them)."""
+        try:
+            return self._load_steps()
+        finally:
+            options.remove_options(self.from_scene)
+
+    def _load_steps(self):
         scene, system, comm = self.scene, self.system, self.comm
         n_steps = scene.load.steps
         u = system.u.copy()

@@ -504,15 +504,16 @@ SCHEMA = Table({
         "contact_preconditioner": Choice(("auto", "band", "none"),
                                          "Linear solves with contact pairs: \"auto\" composes an algebraic "
                                          "multigrid (BoomerAMG unless pc_type names gamg) with an exact solve on the "
-                                         "contact band when pc_type is unset, hypre or gamg; \"band\" composes "
-                                         "whatever pc_type names; \"none\" uses the options as given (GAMG when "
-                                         "pc_type is unset). Without contact pairs the default PC is GAMG.",
+                                         "contact band when pc_type is unset, hypre or gamg, under GMRES unless "
+                                         "ksp_type is named; \"band\" composes whatever pc_type names; \"none\" "
+                                         "uses the options as given (CG + GAMG when unset). Without contact pairs "
+                                         "the default is CG + GAMG.",
                                          default="auto"),
         "contact_band_layers": Int("Rings of element neighbours added to the contact rows' dofs in the band.",
                                    ge=0, le=5, default=1),
     }, "Nonlinear solver controls."),
     "petsc": Options(f"PETSc options without the {OPTIONS_PREFIX!r} prefix, nested tables joined by \"_\"; "
-                     "merged over the defaults.", default={"ksp_type": "cg", "ksp_rtol": "1e-10"}),
+                     "merged over the defaults.", default={"ksp_rtol": "1e-10"}),
     "output": Table({
         "directory": Str("Output folder; {name} is the scene name; relative to the working directory.",
                          default="results/{name}"),

@@ -5,32 +5,38 @@ import numpy as np
 import pytest
 from conftest import CONFIGS, all_close
 
-ITERATIVE = ["petsc.ksp_type=cg", "petsc.ksp_rtol=1e-10", "output.xdmf=false",
-             "bodies.0.mesh.cells=[4,4,2]", "bodies.1.mesh.cells=[7,7,2]"]
+MESHES = ["petsc.ksp_rtol=1e-10", "output.xdmf=false", "bodies.0.mesh.cells=[4,4,2]", "bodies.1.mesh.cells=[7,7,2]"]
+ITERATIVE = ["petsc.ksp_type=cg", *MESHES]
 
 
-def solve(comm, tmp, sets, path=CONFIGS / "patch_test.toml"):
+def solve(comm, tmp, sets, path=CONFIGS / "patch_test.toml", base=ITERATIVE):
     from qsc_petsc.run import Run
     from qsc_petsc.scene import load_scene
-    run = Run(load_scene(path, ITERATIVE + sets), comm, tmp, log=lambda *a: None)
+    run = Run(load_scene(path, base + sets), comm, tmp, log=lambda *a: None)
     s = run.execute()
     band = run.system.band_dofs
     pc = run.system.snes.getKSP().getPC()
     s["multigrid"] = pc.getCompositePC(0).getType() if pc.getType() == "composite" else None
+    s["krylov"] = run.system.snes.getKSP().getType()
     run.destroy()
     pair = next(iter(s["steps"][-1]["contact"].values()))
     return s, band, [s["steps"][-1]["max_abs_displacement"], pair["total_normal_force"],
                      pair["max_penetration_slave"], pair["contact_area"]]
 
 
+@pytest.mark.parametrize("krylov", ["cg", "gmres"])
 @pytest.mark.parametrize("amg", ["gamg", "hypre"])
 @pytest.mark.parametrize("formulation", ["master_slave", "quasi_symmetric"])
-def test_band_preconditioner_same_answer_fewer_iterations(comm, mpi_tmp, formulation, amg):
-    """With alpha 1e4 the band preconditioner gives the plain CG + multigrid answer (to the solver tolerance)
-    in less than half the Krylov iterations."""
-    common = [f"contact.0.formulation={formulation}", "contact.0.penalty=1e4", f"petsc.pc_type={amg}"]
-    s_band, band, q_band = solve(comm, mpi_tmp / "band", common + ["solver.contact_preconditioner=auto"])
-    s_none, none_band, q_none = solve(comm, mpi_tmp / "none", common + ["solver.contact_preconditioner=none"])
+def test_band_preconditioner_same_answer_fewer_iterations(comm, mpi_tmp, formulation, amg, krylov):
+    """With alpha 1e4 the band preconditioner gives the plain Krylov + multigrid answer (to the solver
+    tolerance) in less than half the Krylov iterations, under CG and under GMRES."""
+    common = [f"contact.0.formulation={formulation}", "contact.0.penalty=1e4", f"petsc.pc_type={amg}",
+              f"petsc.ksp_type={krylov}"]
+    if (amg, krylov) == ("hypre", "cg"):   # plain CG + BoomerAMG: hybrid Gauss-Seidel went indefinite on 3 ranks
+        common.append("petsc.pc_hypre_boomeramg_relax_type_all=l1scaled-SOR/Jacobi")
+    s_band, band, q_band = solve(comm, mpi_tmp / "band", common + ["solver.contact_preconditioner=auto"], base=MESHES)
+    s_none, none_band, q_none = solve(comm, mpi_tmp / "none", common + ["solver.contact_preconditioner=none"],
+                                      base=MESHES)
     assert s_band["status"] == "ok" and s_none["status"] == "ok"
     assert band > 0 and none_band == 0
     assert all_close(comm, np.allclose(q_band, q_none, rtol=1e-6, atol=1e-14))
@@ -45,15 +51,16 @@ def test_band_preconditioner_is_not_used_with_a_direct_solver(comm, mpi_tmp):
     assert band == 0
 
 
-def test_band_preconditioner_defaults_to_boomeramg(comm, mpi_tmp):
-    """With contact pairs and no pc_type, "auto" composes hypre's BoomerAMG with the band: the same answer as
-    the band with GAMG named explicitly."""
+def test_band_preconditioner_defaults_to_gmres_and_boomeramg(comm, mpi_tmp):
+    """With contact pairs and neither ksp_type nor pc_type, "auto" composes hypre's BoomerAMG with the band
+    under GMRES: the same answer as CG with the band and GAMG named explicitly."""
     path = mpi_tmp / "no_petsc.toml"       # the patch test without its [petsc] table (its last): no pc_type
     if comm.rank == 0:
         path.write_text((CONFIGS / "patch_test.toml").read_text().split("\n[petsc]")[0])
     comm.Barrier()
-    s_default, band, q_default = solve(comm, mpi_tmp / "default", [], path)
-    s_gamg, _, q_gamg = solve(comm, mpi_tmp / "gamg", ["petsc.pc_type=gamg"])
+    s_default, band, q_default = solve(comm, mpi_tmp / "default", [], path, base=MESHES)
+    s_named, _, q_named = solve(comm, mpi_tmp / "gamg", ["petsc.pc_type=gamg"])
     assert s_default["status"] == "ok" and band > 0
-    assert (s_default["multigrid"], s_gamg["multigrid"]) == ("hypre", "gamg")
-    assert all_close(comm, np.allclose(q_default, q_gamg, rtol=1e-6, atol=1e-14))
+    assert (s_default["krylov"], s_default["multigrid"]) == ("gmres", "hypre")
+    assert (s_named["krylov"], s_named["multigrid"]) == ("cg", "gamg")
+    assert all_close(comm, np.allclose(q_default, q_named, rtol=1e-6, atol=1e-14))

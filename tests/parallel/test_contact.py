@@ -105,9 +105,13 @@ def test_bad_contact_input(comm, mpi_tmp, change, message):
 
 
 def test_surfaces_beyond_search_distance(comm, mpi_tmp):
-    """Surfaces farther apart than the search distance are an error naming the pair."""
+    """Surfaces farther apart than the search distance are an error naming the pair; the failed set-up
+    takes its scene's PETSc options back out (the next run in the process must not inherit them)."""
+    from petsc4py import PETSc
+    before = PETSc.Options().getAll()
     with pytest.raises(SceneError, match=r"contact\[0\]: no node"):
         run_scene(CONFIGS / "patch_test.toml", mpi_tmp, ["bodies.1.mesh.origin=[0,0,0.9]"], comm)
+    assert "qsc_pc_type" not in set(PETSc.Options().getAll()) - set(before)
 
 
 def test_augmented_lagrangian_removes_the_penalty_error(comm, mpi_tmp):
