@@ -84,8 +84,8 @@ def main():
                             f"{sum(x['ksp_iterations'] for x in s['steps'])} | {s['peak_memory_mib']['total']:.0f} |")
                 print(rows[-1], flush=True)
     loads.append(load())
-    defaults = ("defaults: CG; GAMG for the merged body, BoomerAMG composed with the exact solve on the contact band "
-                "with contact pairs")
+    defaults = ("defaults: CG + GAMG for the merged body; with contact pairs GMRES + BoomerAMG composed with the "
+                "exact solve on the contact band")
     description = ("two unit cubes, upper mesh 1.5x finer, sticking rigid dies, top die down 1 % of the height in "
                    f"2 load steps, alpha = 1e4, PETSc options: `{args.petsc or defaults}`; `merged` = "
                    "the same 1 x 1 x 2 stack meshed as one conforming body with about the same number of dofs. "
