@@ -90,7 +90,8 @@ def install_band_pc(ksp, K, couplings, layers, comm):
     When the options name no KSP, it becomes GMRES (right-preconditioned, as the true-residual test
     needs) with the multiplicative composite, one V-cycle per iteration; a named CG gets the
     symmetric-multiplicative one (so CG stays valid, at two V-cycles per iteration), any other KSP the
-    multiplicative one. Returns the global number of band dofs. A fresh PC per search: ASM subdomains are fixed at setup."""
+    multiplicative one. Returns the global number of band dofs. A fresh PC per search: ASM subdomains are
+    fixed at setup."""
     band = band_dofs(K, couplings, layers)
     krylov = effective_option("ksp_type")
     hypre = HYPRE_DEFAULTS | (CG_HYPRE_DEFAULTS if krylov == "cg" else {}) if amg_type() == "hypre" else {}
@@ -106,6 +107,7 @@ def install_band_pc(ksp, K, couplings, layers, comm):
     if krylov is None:
         ksp.setType("gmres")             # one V-cycle per iteration (CG needs the symmetric form: two)
         ksp.setGMRESRestart(GMRES_RESTART)
+        ksp.setPCSide(PETSc.PC.Side.RIGHT)   # left-preconditioned GMRES cannot test the true residual
     pc.setCompositeType(PETSc.PC.CompositeType.SYMMETRIC_MULTIPLICATIVE if krylov == "cg"
                         else PETSc.PC.CompositeType.MULTIPLICATIVE)
     pc.addCompositePCType(amg_type())
