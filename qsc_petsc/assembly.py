@@ -135,13 +135,14 @@ def _owned_sums(mesh, pattern, entries, layout, groups, lmbda, mu, last):
     for r0, r1 in sparsity.row_batches(pattern.cptr, BATCH):
         V = _batch_sums(mesh, pattern, entries, r0, r1, groups, lmbda, mu, cache)        # (blocks of the batch, 9)
         q0 = pattern.rowptr[r0]
-        for a, b in sparsity.equal_runs(nb[r0:r1], plain[r0:r1], r0):
+        runs = sparsity.equal_runs(nb[r0:r1], plain[r0:r1], r0)
+        for a, b in runs:
             p0, p1, w = pattern.rowptr[a], pattern.rowptr[b], nb[a]
             d0, d1 = 9 * rowptr_d[a], 9 * rowptr_d[b]
             shape = (b - a, 3, w, 3)
             vals[d0:d1].reshape(shape)[...] = V[p0 - q0:p1 - q0].reshape(b - a, w, 3, 3).transpose(0, 2, 1, 3)
             cols[d0:d1].reshape(shape)[...] = (3 * (pattern.col[p0:p1] - v0)).reshape(b - a, 1, w, 1) + np.arange(3)
-        odd = np.flatnonzero(~sparsity.in_runs(nb[r0:r1], plain[r0:r1])) + r0
+        odd = np.flatnonzero(~sparsity.covered(runs, r1 - r0, r0)) + r0
         if len(odd):
             lens = nb[odd]
             row = np.repeat(odd, lens)

@@ -28,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
+from . import fem
 from .errors import MeshError
 
 PARTS = ("sphere", "block")
@@ -96,7 +97,6 @@ def lumped_traction(points, faces, pressure_field, n_gauss=6):
     """Nodal traction F_k / A_k [Pa] of a given pressure field on triangles faces (m, 3) of points (n, 3): the
     consistent nodal force int N_k p ds over the lumped area int N_k ds, the measure of the product's
     contact_traction output. NaN off the faces. pressure_field: function of points (q, 3) -> (q,) [Pa]."""
-    from . import fem
     xf = points[faces]
     force = np.abs(fem.face_pressure_loads("tri", xf, pressure_field, n_gauss)[..., 2])
     area = fem.face_nodal_areas("tri", xf)

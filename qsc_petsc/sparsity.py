@@ -167,9 +167,9 @@ def equal_runs(nb, plain, offset=0):
     return list(zip((start[keep] + offset).tolist(), (end[keep] + offset).tolist()))
 
 
-def in_runs(nb, plain):
-    """Mask of the rows that equal_runs covers."""
-    mask = np.zeros(len(nb), bool)
-    for a, b in equal_runs(nb, plain):
-        mask[a:b] = True
+def covered(runs, n, offset=0):
+    """Mask (n,) of the rows (minus offset) that runs [(a, b), ...] from equal_runs cover."""
+    mask = np.zeros(n, bool)
+    for a, b in runs:
+        mask[a - offset:b - offset] = True
     return mask

@@ -76,4 +76,6 @@ def test_equal_runs():
     nb = np.array([8, 27, 27, 27, 27, 27, 18, 18, 18, 18])
     plain = np.array([True] * 9 + [False])
     assert sparsity.equal_runs(nb, plain, 100) == [(101, 106)]
-    assert sparsity.in_runs(nb, plain).tolist() == [False] + [True] * 5 + [False] * 4
+    assert sparsity.covered(sparsity.equal_runs(nb, plain), len(nb)).tolist() == [False] + [True] * 5 + [False] * 4
+    assert sparsity.covered(sparsity.equal_runs(nb, plain, 100), len(nb), 100).tolist() == \
+        [False] + [True] * 5 + [False] * 4
