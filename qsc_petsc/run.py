@@ -18,21 +18,31 @@ from .solver import System, solve_load_step
 
 
 class Phases:
-    """Wall time per phase (max over ranks) and a PETSc log event per phase, for -log_view."""
+    """Wall time per phase (max over ranks) and a PETSc log event per phase, for -log_view.
+
+    A phase entered inside another (search and rows inside a load step's solve) is timed on its own
+    and left out of the enclosing one, so the phases add up to the run's time; the PETSc events
+    stay inclusive, as -log_view reports every event."""
 
     def __init__(self, comm):
         self.comm, self.seconds, self.events = comm, {}, {}
+        self.open = []                 # names of the phases entered and not left, outermost first
 
     @contextmanager
     def __call__(self, name):
         event = self.events.setdefault(name, PETSc.Log.Event(f"qsc:{name}"))
         event.begin()
+        self.open.append(name)
         t0 = time.perf_counter()
         try:
             yield
         finally:
+            elapsed = time.perf_counter() - t0
             event.end()
-            self.seconds[name] = self.seconds.get(name, 0.0) + time.perf_counter() - t0
+            self.open.pop()
+            self.seconds[name] = self.seconds.get(name, 0.0) + elapsed
+            if self.open:
+                self.seconds[self.open[-1]] = self.seconds.get(self.open[-1], 0.0) - elapsed
 
     def summary(self):
         names = sorted(set().union(*self.comm.allgather(set(self.seconds))))

@@ -193,3 +193,26 @@ def test_file_mesh_body(comm, mpi_tmp):
         resolved = load_scene(out / "scene.resolved.toml")
         assert resolved.to_dict() == load_scene(scene).to_dict()
         assert resolved.bodies[0].mesh.path == str(mpi_tmp / "cube.msh")
+
+
+def test_nested_phases_add_up_to_the_run():
+    """A phase inside another (search and rows inside a load step's solve) is timed once: the enclosing
+    phase leaves it out, so the phases add up to the wall time."""
+    import time
+
+    from mpi4py import MPI
+
+    from qsc_petsc.run import Phases
+
+    phases = Phases(MPI.COMM_SELF)
+    t0 = time.perf_counter()
+    with phases("solve"):
+        time.sleep(0.02)
+        with phases("rows"):
+            time.sleep(0.05)
+        time.sleep(0.02)
+    wall = time.perf_counter() - t0
+    seconds = phases.summary()
+    assert seconds["rows"] >= 0.05
+    assert seconds["solve"] >= 0.04
+    assert seconds["solve"] == pytest.approx(wall - seconds["rows"], abs=5e-3)   # without the rows' time
