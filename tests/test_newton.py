@@ -1,0 +1,45 @@
+"""The Newton loop's economy: an unchanged active set keeps the Jacobian and its preconditioner, and the
+Krylov solve stops where the Newton test needs it (solver.System). Small two-cube scene between sticking
+dies, serial, the iterative defaults."""
+
+import numpy as np
+import pytest
+from conftest import CONFIGS, run_scene
+from petsc4py import PETSc
+
+from qsc_petsc.solver import KRYLOV_MARGIN
+
+SMALL = ["bodies.0.mesh.cells=[3,3,3]", "bodies.1.mesh.cells=[4,4,4]"]
+
+
+def scene_without_petsc(tmp_path, petsc=""):
+    """configs/two_cubes_dies.toml with its [petsc] table (MUMPS) replaced by `petsc`: the defaults if empty."""
+    text = (CONFIGS / "two_cubes_dies.toml").read_text()
+    path = tmp_path / "scene.toml"
+    path.write_text(text[:text.index("[petsc]")] + (f"[petsc]\n{petsc}\n" if petsc else ""))
+    return path
+
+
+def test_unchanged_active_set_keeps_the_jacobian(tmp_path):
+    """Every increment's second Newton step sees the active set of the first: it shall reuse the Jacobian
+    (one assembly per increment) and still give the direct solver's answer."""
+    run, summary = run_scene(scene_without_petsc(tmp_path), tmp_path / "iterative", SMALL)
+    solves = [s for step in summary["steps"] for s in step["solves"]]
+    assert all(s["snes_iterations"] == 2 and s["jacobian_assemblies"] == 1 for s in solves)
+    u = run.u.getArray().copy()
+    direct, _ = run_scene(CONFIGS / "two_cubes_dies.toml", tmp_path / "direct", SMALL)
+    ref = direct.u.getArray()
+    assert np.abs(u - ref).max() <= 1e-8 * np.abs(ref).max()
+
+
+def test_krylov_stops_at_the_newton_target(tmp_path):
+    """With the true-residual norm the KSP's absolute tolerance is KRYLOV_MARGIN x snes_rtol x the force
+    scale of the current iterate (the last Newton step's, within 1e-6 of the final one); a ksp_atol the user sets stays."""
+    run, _ = run_scene(scene_without_petsc(tmp_path), tmp_path / "auto", SMALL)
+    snes = run.system.snes
+    atol = snes.getKSP().getTolerances()[1]
+    assert atol == pytest.approx(KRYLOV_MARGIN * snes.getTolerances()[0] * run.system.force_scale, rel=1e-6)
+    assert atol > 1e-40
+    run, _ = run_scene(scene_without_petsc(tmp_path, 'ksp_atol = "1e-40"'), tmp_path / "user", SMALL)
+    assert run.system.snes.getKSP().getTolerances()[1] == 1e-40
+    assert not PETSc.Options().hasName("qsc_ksp_atol")      # the scene's option left with its run
