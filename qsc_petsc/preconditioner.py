@@ -13,8 +13,8 @@ couplings across the interface: on the two cubes (70k dofs), CG with the band ne
 per Newton step with BoomerAMG and 54-79 with GAMG (docs/performance.md).
 GMRES takes the multiplicative composite, one V-cycle per iteration; CG needs the symmetric one, two.
 BoomerAMG's settings (HMIS coarsening, ext+i interpolation, at most 4 weights per row, strength
-threshold 0.5, one level of aggressive coarsening: the usual 3-D elasticity choices; under CG also
-l1-scaled smoothing) are defaults that any `-qsc_pc_hypre_*` option overrides. The multigrid reads the system's own
+threshold 0.5, one level of aggressive coarsening: the usual 3-D elasticity choices; one forward
+l1-Gauss-Seidel sweep down and one backward sweep up) are defaults that any `-qsc_pc_hypre_*` option overrides. The multigrid reads the system's own
 options (`-qsc_pc_*`); the band is one submatrix across all ranks, factored once per new Jacobian
 (`-qsc_band_*`: default preonly + Cholesky with MUMPS).
 """
@@ -26,14 +26,16 @@ from .options import set_from_options
 
 AMG_TYPES = ("hypre", "gamg")        # the band's partner: the first is the default
 # BoomerAMG: cheaper V-cycles than hypre's defaults (about half the operator complexity, measured) at the
-# same or a slightly larger iteration count.
+# same or a slightly larger iteration count. Smoothing: one forward l1-Gauss-Seidel sweep down and one
+# backward sweep up, a symmetric V-cycle (so CG stays valid) at half the work of hypre's default
+# symmetric hybrid Gauss-Seidel sweeps; the l1 form converges where penalty rows couple across ranks, where
+# hybrid Gauss-Seidel (Jacobi between ranks) need not (plain CG + BoomerAMG stopped with an indefinite
+# preconditioner on 3 ranks, patch test). Two cubes, 212k dofs: 22.7 s against 27.4 s (docs/performance.md).
 HYPRE_DEFAULTS = {"pc_hypre_boomeramg_coarsen_type": "HMIS", "pc_hypre_boomeramg_interp_type": "ext+i",
                   "pc_hypre_boomeramg_P_max": "4", "pc_hypre_boomeramg_strong_threshold": "0.5",
-                  "pc_hypre_boomeramg_agg_nl": "1"}
-# Under CG, l1-scaled smoothing: hypre's hybrid Gauss-Seidel is Jacobi between ranks, which need not
-# converge where penalty rows couple across them (plain CG + BoomerAMG stopped with an indefinite
-# preconditioner on 3 ranks, patch test); GMRES runs 12 % faster without it (measured).
-CG_HYPRE_DEFAULTS = {"pc_hypre_boomeramg_relax_type_all": "l1scaled-SOR/Jacobi"}
+                  "pc_hypre_boomeramg_agg_nl": "1",
+                  "pc_hypre_boomeramg_relax_type_down": "l1-Gauss-Seidel",
+                  "pc_hypre_boomeramg_relax_type_up": "backward-l1-Gauss-Seidel"}
 GMRES_RESTART = 100        # above the iteration counts measured (docs/performance.md): no restarts
 
 
@@ -143,7 +145,7 @@ def install_band_pc(ksp, K, couplings, layers, comm):
     the new rows."""
     band = band_dofs(K, couplings, layers)
     krylov = effective_option("ksp_type")
-    hypre = HYPRE_DEFAULTS | (CG_HYPRE_DEFAULTS if krylov == "cg" else {}) if amg_type() == "hypre" else {}
+    hypre = HYPRE_DEFAULTS if amg_type() == "hypre" else {}
     opts = PETSc.Options()
     added = []                          # multigrid defaults: read once below, then removed (see the end)
     for key, value in hypre.items():
