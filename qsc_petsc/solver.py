@@ -62,11 +62,11 @@ class ConstraintTerm:
         """f += G^T m: the scatter of G^T is where slave multipliers cross ranks."""
         self.G.multTransposeAdd(self.m, f, f)
 
-    def jacobian(self):
-        """G^T diag(d) G as a new matrix."""
+    def jacobian(self, d=None):
+        """G^T diag(d) G as a new matrix (d: per existing row, default the rows' stiffnesses at the last evaluate)."""
         dvec = self.G.createVecLeft()
         dvec.set(0.0)
-        dvec.getArray()[self.rows] = self.d
+        dvec.getArray()[self.rows] = self.d if d is None else d
         DG = self.G.copy()
         DG.diagonalScale(L=dvec)
         return self.G.transposeMatMult(DG)
@@ -146,20 +146,27 @@ class System:
         options.set_from_options(self.snes, "solver (-qsc_snes_*, -qsc_ksp_*, -qsc_pc_*)")
 
     def set_terms(self, terms):
-        """Install the constraint terms of a new search; rebuild the Jacobian's sparsity once."""
+        """Install the constraint terms of a new search; rebuild the Jacobian's sparsity once.
+
+        J gets the union of K's pattern and every term's G^T G, with the terms' part zero (jacobian_d:
+        the rows' stiffnesses J holds); _jacobian then adds only what the active set changes."""
         self.terms = terms
         # G^T G of every term: the Jacobian's contact stencil, and the contact pairs' band for the preconditioner
         stencils = [term.G.transposeMatMult(term.G) for term in terms]
         if not terms:
             self.J = self.K
         else:
+            pattern = stencils[0].copy()
+            for GtG in stencils[1:]:      # summed first: one pass over K's rows, not one per term
+                pattern.axpy(1.0, GtG, PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
+            pattern.zeroEntries()
             J = self.K.copy()
-            for GtG in stencils:
-                J.axpy(1.0, GtG, PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
+            J.axpy(1.0, pattern, PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
+            pattern.destroy()
             J.setNearNullSpace(self.K.getNearNullSpace())
             self.J = J
         self.snes.setJacobian(self._jacobian, self.J, self.J)
-        self.jacobian_d = None
+        self.jacobian_d = [np.zeros_like(term.d) for term in terms]
         pairs = [GtG for term, GtG in zip(terms, stencils) if term.name.startswith("contact")]
         if preconditioner.wants_band(self.contact_pc, bool(pairs)):
             self.band_dofs = preconditioner.install_band_pc(self.snes.getKSP(), self.K, pairs,
@@ -189,19 +196,20 @@ class System:
         self._match_krylov_to_newton(snes)
         if not self.terms:
             return
-        d = [term.d for term in self.terms]
-        same = self.jacobian_d is not None and all(np.array_equal(a, b) for a, b in zip(d, self.jacobian_d))
-        if self.comm.allreduce(same, op=MPI.LAND):
+        mine = np.array([not np.array_equal(term.d, held) for term, held in zip(self.terms, self.jacobian_d)])
+        changed = np.zeros_like(mine)
+        self.comm.Allreduce(mine, changed, op=MPI.LOR)
+        if not changed.any():
             return        # J untouched: its state is unchanged, so PCSetUp keeps the preconditioner too
-        self.jacobian_d = [a.copy() for a in d]
         self.jacobian_rebuilds += 1
-        J.zeroEntries()
-        J.axpy(1.0, self.K, SUBSET)
-        for term in self.terms:
-            Jc = term.jacobian()
+        for i in np.flatnonzero(changed):
+            # J += G^T diag(d - d_held) G, held dofs' rows and columns left out (K's are already identity)
+            term = self.terms[i]
+            Jc = term.jacobian(term.d - self.jacobian_d[i])
+            Jc.zeroRowsColumns(self.bc_dofs, 0.0)
             J.axpy(1.0, Jc, SUBSET)
             Jc.destroy()
-        J.zeroRowsColumns(self.bc_dofs, 1.0)
+            self.jacobian_d[i] = term.d.copy()
         for term in self.terms:
             term.start = False
 
