@@ -110,22 +110,37 @@ def lumped_traction(points, faces, pressure_field, n_gauss=6):
 def traction_scatter(points, faces, traction, a, p0, band=0.5):
     """Where the nodal traction t of one contact surface departs from Hertz's p(r), within r < band * a.
 
-    Nodes on a symmetry plane (x = 0 or y = 0) and the others are taken apart, because the quarter
-    model's symmetry-plane nodes have half a patch. Returns t / p(r) on them (edge_mean; interior_mean,
-    interior_std, interior_max), and exact_error: the largest |F_k/A_k / p(r_k) - 1| of the measure
-    itself applied to the exact Hertz pressure (lumped_traction) on the same nodes."""
+    Nodes on a symmetry plane (x = 0 or y = 0, the origin excepted: it lies on both planes with a quarter
+    patch and reads apart) and the others are taken apart, because a mesh conforming to a plane across the
+    contact carries a band there (nodes on the plane high, the next row low). Returns t / p(r) on the plane
+    nodes (edge_mean), on the off-plane nodes within one mean face size h of a plane (row_mean) and on all
+    off-plane nodes (interior_mean, interior_std, interior_max); t / p0 at the origin node (origin, NaN
+    without one) and the largest t / p0 off the planes (interior_peak); and exact_error: the largest
+    |F_k/A_k / p(r_k) - 1| of the measure itself applied to the exact Hertz pressure (lumped_traction) on
+    the same nodes."""
     faces = np.asarray(faces)
     v = np.unique(faces)
     r = np.hypot(points[v, 0], points[v, 1])
     v, r = v[r < band * a], r[r < band * a]
     pH = pressure(r, a, p0)
-    q = np.asarray(traction, float)[v] / pH
-    tol = TOL * max(float(np.abs(points[faces]).max()), 1e-300)
-    edge = (np.abs(points[v, 0]) < tol) | (np.abs(points[v, 1]) < tol)
+    t = np.asarray(traction, float)[v]
+    q = t / pH
+    xf = points[faces]
+    tol = TOL * max(float(np.abs(xf).max()), 1e-300)
+    h = fem.face_size(xf)[np.hypot(*xf.mean(axis=1)[:, :2].T) < band * a].mean()
+    d = np.minimum(np.abs(points[v, 0]), np.abs(points[v, 1]))        # distance to the nearer plane
+    axis = r < tol
+    edge = (d < tol) & ~axis
+    off = d >= tol
+    row = off & (d < h)
     exact = lumped_traction(points, faces, lambda x: pressure(np.hypot(x[:, 0], x[:, 1]), a, p0))[v] / pH
-    return {"edge_mean": float(q[edge].mean()) if edge.any() else float("nan"),
-            "interior_mean": float(q[~edge].mean()), "interior_std": float(q[~edge].std()),
-            "interior_max": float(q[~edge].max()), "exact_error": float(np.abs(exact - 1.0).max())}
+
+    def mean(m):
+        return float(q[m].mean()) if m.any() else float("nan")
+    return {"edge_mean": mean(edge), "row_mean": mean(row), "interior_mean": mean(off),
+            "interior_std": float(q[off].std()), "interior_max": float(q[off].max()),
+            "origin": float(t[axis][0] / p0) if axis.any() else float("nan"),
+            "interior_peak": float(t[off].max() / p0), "exact_error": float(np.abs(exact - 1.0).max())}
 
 
 # ---------------------------------------------------------------- meshes

@@ -15,11 +15,17 @@ On each contact surface (sphere, block), from the last step's nodal contact_trac
     best separates nodes with t > 1 % of max t from the others), and (a - a_H) / h with h the mean
     size of that surface's faces within r < a_H.
 A second table takes the scatter of the nodal traction apart (hertz.traction_scatter: nodes on the symmetry
-planes against the others, within r < a/2, and the measure's own error on the exact Hertz pressure), for the
-segment runs and two mixed-level runs (fine sphere on the medium block and back; --no-probes skips them).
+planes, the next row and the others, within r < a/2, the largest traction off the planes, and the measure's own
+error on the exact Hertz pressure), for the segment runs and two mixed-level runs (fine sphere on the medium block
+and back; --no-probes skips them).
 Writes docs/hertz.csv, docs/hertz.png (traction against radius, finest level) and both tables into
 docs/verification.md. Runs go to build/hertz/. Usage:
   .venv/bin/python scripts/hertz.py [--levels coarse medium fine] [--ranks 1 1 2]   (about 60 minutes)
+  .venv/bin/python scripts/hertz.py --elastic-probe [--levels ...]   (no contact, serial, seconds; writes nothing)
+The elastic probe asks whether the symmetry-plane band of the nodal traction needs contact at all: each part alone,
+Hertz's own surface displacement prescribed on its contact nodes within r < a (normal component only, the tangential
+ones free: a frictionless punch of Hertz's shape, whose pressure is Hertz's p(r) up to the parts' finite size), the
+nodal reaction over the tributary area read like the contact traction (hertz.traction_scatter).
 """
 
 import argparse
@@ -53,7 +59,8 @@ QUADRATURE_ITERATIONS = 80
 SLAVES = {"sphere": ("sphere.contact", "block.contact"), "block": ("block.contact", "sphere.contact")}
 SURFACES = ("sphere", "block")
 RUNS = ROOT / "build" / "hertz"
-SCATTER = ("edge_mean", "interior_mean", "interior_std", "interior_max", "exact_error")   # hertz.traction_scatter
+SCATTER = ("edge_mean", "row_mean", "interior_mean", "interior_std", "interior_max", "origin", "interior_peak",
+           "exact_error")   # hertz.traction_scatter
 COLUMNS = ["level", "block_level", "formulation", "integration", "slave", "dofs", "newton", "wall_s", "force", "a_hertz",
            "p0_hertz"] + [f"{m}_{s}" for s in SURFACES for m in ("max_t", "fit_p0", "a", "h", *SCATTER)]
 # Where the finer surface's scatter comes from: the fine sphere on the medium block and the medium sphere on
@@ -169,6 +176,61 @@ def plot(rows, profiles, level, path):
     fig.savefig(path, dpi=110)
 
 
+def elastic_probe(level, a=0.1, p0=1.0):
+    """The elastic probe of the module docstring on one level: {surface: hertz.traction_scatter dict}, serial.
+
+    a [m] is Hertz's contact radius (0.1 R as in the scenes); p0 [Pa] only scales the answer (linear)."""
+    from mpi4py import MPI
+    from petsc4py import PETSc
+
+    from qsc_petsc import assembly
+    from qsc_petsc.mesh import distribute_mesh
+    scene = load_scene(ROOT / "configs" / f"hertz_{level}.toml")
+    mesh = distribute_mesh(scene, MPI.COMM_SELF)
+    X = mesh.coords
+    K = assembly.stiffness_matrix(mesh, *assembly.cell_materials(mesh, scene))
+    bc_dofs, _, _ = assembly.dirichlet_dofs(mesh, scene)
+    out = {}
+    for body, part in enumerate(SURFACES):
+        mat = scene.bodies[body].material
+        nodes = mesh.surface_vertices(f"{part}.contact")
+        r = np.hypot(X[nodes, 0], X[nodes, 1])
+        # Hertz's surface displacement of one half-space: (1 - nu^2) / E pi p0 / (4 a) (2 a^2 - r^2), into the body
+        sign = 1.0 if part == "sphere" else -1.0
+        w = sign * (1 - mat.poissons_ratio ** 2) / mat.youngs_modulus * np.pi * p0 / (4 * a) * (2 * a * a - r * r)
+        other = np.setdiff1d(np.arange(len(X)), mesh.body_vertices(body))      # the other part stays put
+        mine = bc_dofs[~np.isin(bc_dofs // 3, mesh.gvert[other])]      # this part's own boundaries, held at 0
+        dofs = np.concatenate([3 * mesh.gvert[nodes[r < a]] + 2, mine,
+                               (3 * mesh.gvert[other][:, None] + np.arange(3)).ravel()])
+        vals = np.concatenate([w[r < a], np.zeros(len(dofs) - (r < a).sum())])
+        dofs, first = np.unique(dofs, return_index=True)
+        u, rhs, x, react = K.createVecRight(), K.createVecLeft(), K.createVecRight(), K.createVecLeft()
+        u.set(0.0)
+        u.setValues(dofs.astype(PETSc.IntType), vals[first])
+        u.assemble()
+        rhs.set(0.0)
+        A = K.duplicate(copy=True)
+        A.zeroRowsColumns(dofs.astype(PETSc.IntType), 1.0, u, rhs)
+        ksp = PETSc.KSP().create(MPI.COMM_SELF)
+        ksp.setOperators(A)
+        ksp.setType("preonly")
+        ksp.getPC().setType("lu")
+        ksp.getPC().setFactorSolverType("mumps")
+        ksp.solve(rhs, x)
+        K.mult(x, react)
+        c, lf = mesh.surface_faces(f"{part}.contact")
+        faces = mesh.face_nodes(c, lf)
+        area = np.zeros(len(X))
+        np.add.at(area, faces, fem.face_nodal_areas(mesh.face_type, X[faces]))
+        t = np.zeros(len(X))
+        t[nodes] = sign * react.getArray().reshape(-1, 3)[mesh.gvert[nodes] - mesh.vertex_range[0], 2] / area[nodes]
+        out[part] = hertz.traction_scatter(X, faces, t, a, p0)
+        for obj in (u, rhs, x, react, A, ksp):
+            obj.destroy()
+    K.destroy()
+    return out
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--levels", nargs="+", default=list(LEVELS), choices=LEVELS)
@@ -177,8 +239,18 @@ def main():
                     help="skip the two mixed-level runs of the scatter table (sphere fine on block medium and back)")
     ap.add_argument("--reuse", action="store_true",
                     help="keep the finished runs (status ok) already in build/hertz instead of solving them again")
+    ap.add_argument("--elastic-probe", action="store_true",
+                    help="no contact: print the symmetry-plane band of each part under Hertz's prescribed surface "
+                         "displacement (see above) for --levels, and stop")
     add_docs_args(ap, "Hertz contact")
     args = ap.parse_args()
+    if args.elastic_probe:
+        print("level part: t / p on plane nodes, next row, off-plane (mean +- std) within r < a/2")
+        for level in args.levels:
+            for part, st in elastic_probe(level).items():
+                print(f"{level} {part}: {st['edge_mean']:.3f}, {st['row_mean']:.3f}, {st['interior_mean']:.3f} "
+                      f"+- {st['interior_std']:.3f}", flush=True)
+        return
     if len(args.ranks) != len(args.levels):
         ap.error("--ranks needs one count per level")
     rows, profiles = [], {}
@@ -242,16 +314,19 @@ def main():
         scatter.append("| " + " | ".join([
             r["level"], r["block_level"], r["formulation"], r["slave"],
             pair(r, "h", lambda r, s: r["a_hertz"]), pair(r, "max_t", lambda r, s: r["p0_hertz"]),
-            *(pair(r, k) for k in ("edge_mean", "interior_mean", "interior_std", "interior_max")),
+            *(pair(r, k) for k in ("edge_mean", "row_mean", "interior_mean", "interior_std", "interior_max")),
+            pair(r, "interior_peak"),
             pair(r, "exact_error", fmt="{:.1e}")]) + " |")
-    headers = ["sphere level", "block level", "formulation", "slave", "h / a_H", "max t / p0", "edge nodes: mean t / p",
-               "interior: mean t / p", "interior: std", "interior: max t / p", "measure on exact p: max error"]
+    headers = ["sphere level", "block level", "formulation", "slave", "h / a_H", "max t / p0",
+               "plane nodes: mean t / p", "next row: mean t / p", "off-plane: mean t / p", "off-plane: std",
+               "off-plane: max t / p", "off-plane: max t / p0", "measure on exact p: max error"]
     description = ("segment integration; the same runs as the table above plus two mixed-level runs (two_pass, "
                    "sphere slave; --no-probes skips them); nodes within r < a_H / 2 of each contact surface, "
-                   "t / p = nodal traction over Hertz's p(r); edge = nodes on a symmetry plane (half patch), "
-                   "interior = the others; last column: the largest error of the traction measure F_k / A_k "
-                   "itself, applied to the exact Hertz pressure on the same mesh (qsc_petsc.hertz.traction_scatter); "
-                   "each pair of numbers is sphere surface / block surface")
+                   "t / p = nodal traction over Hertz's p(r); plane nodes = nodes on a symmetry plane (half patch; "
+                   "the origin, on both planes, excepted), next row = off-plane nodes within one face size of a "
+                   "plane, off-plane = every node off the planes; last column: the largest error of the traction "
+                   "measure F_k / A_k itself, applied to the exact Hertz pressure on the same mesh "
+                   "(qsc_petsc.hertz.traction_scatter); each pair of numbers is sphere surface / block surface")
     write_table(docs / "verification.md", args.title + ": scatter of the nodal traction", "hertz.py", description,
                 headers, scatter)
 
