@@ -147,17 +147,32 @@ def _pass_entries(pss):
 
 
 def _tested_rows(pss, scale, test_nodes, test_shape):
-    """Point q's w_q h_q, times scale_q N^k, added to row 3 k for every test node k (test_nodes (p, nt))."""
+    """Point q's w_q h_q, times scale_q N^k, added to row 3 k for every test node k (test_nodes (p, nt)).
+
+    The points of one (S face, T face) pair share their columns and test rows: their entries are
+    summed here, one block per pair and test node (segment integration has tens of points per pair,
+    and the distributed matrix would otherwise receive and sum each entry that many times)."""
     cols, vals, g, W = _pass_entries(pss)
     p = len(pss.node)
     ncol = cols.shape[1]
     f = np.broadcast_to(np.asarray(scale, dtype=float), (p,))[:, None] * test_shape   # (p, nt)
-    keep = f != 0.0            # N^k = 0 (on an edge) or a zero weight adds nothing
+    if p == 0:
+        return _ints(), _ints(), np.zeros(0), _ints(), np.zeros(0), _ints(), np.zeros(0)
+    faces = np.concatenate([pss.source_nodes, pss.target_nodes], axis=1)
+    _, first, pair = np.unique(faces, axis=0, return_index=True, return_inverse=True)
+    order = np.argsort(pair.reshape(-1), kind="stable")
+    starts = np.flatnonzero(np.r_[True, np.diff(pair.reshape(-1)[order]) != 0])
+
+    def summed(x):
+        return np.add.reduceat(x[order], starts, axis=0)
+
+    Gv = summed(f[:, :, None] * vals[:, None, :])                     # (pairs, nt, ncol)
+    gv, Wv, weight = summed(f * g[:, None]), summed(f * W[:, None]), summed(np.abs(f))
+    keep = weight != 0.0       # N^k = 0 at every point (on an edge) or a zero weight adds nothing
     lk, kk = np.nonzero(keep)
-    fk = f[lk, kk]
-    row = 3 * test_nodes[lk, kk]
-    return (np.repeat(row, ncol), cols[lk].reshape(-1), (fk[:, None] * vals[lk]).reshape(-1),
-            row, fk * g[lk], row.copy(), fk * W[lk])
+    row = 3 * test_nodes[first[lk], kk]
+    return (np.repeat(row, ncol), cols[first[lk]].reshape(-1), Gv[lk, kk].reshape(-1),
+            row, gv[lk, kk], row.copy(), Wv[lk, kk])
 
 
 def pass_rows(pss, scale):
