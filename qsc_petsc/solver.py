@@ -22,6 +22,7 @@ PETSC_ERR_NOT_CONVERGED = 91   # raised instead of a reason under -qsc_ksp/snes_
 # analysis foresaw): more memory relaxation ICNTL(14) cures it; measured on a 1.7k-dof patch test on 3 ranks
 MUMPS_WORKSPACE_ERRORS = (-8, -9, -14, -15, -17, -20)
 MUMPS_MAX_RELAXATION = 1000    # percent
+KSP_MAX_IT = 2000              # Krylov iterations per linear solve unless -qsc_ksp_max_it says otherwise
 KRYLOV_MARGIN = 0.1            # the Krylov residual's stop below the Newton target (System._match_krylov_to_newton)
 
 
@@ -138,7 +139,9 @@ class System:
         ksp = self.snes.getKSP()
         ksp.setType("cg")
         ksp.getPC().setType("gamg")
-        ksp.setTolerances(rtol=1e-10)
+        # PETSc's 10000 let a stagnating solve run for many minutes before it said so; the most measured
+        # here is ~400 per linear solve (plain CG + GAMG, contact at alpha 1e4, docs/performance.md)
+        ksp.setTolerances(rtol=1e-10, max_it=KSP_MAX_IT)
         self.r = self.u.duplicate()
         self.snes.setFunction(self._residual, self.r)
         self.snes.setJacobian(self._jacobian, self.J, self.J)
