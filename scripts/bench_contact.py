@@ -89,7 +89,8 @@ def main():
     description = ("two unit cubes, upper mesh 1.5x finer, sticking rigid dies, top die down 1 % of the height in "
                    f"2 load steps, alpha = 1e4, PETSc options: `{args.petsc or defaults}`; `merged` = "
                    "the same 1 x 1 x 2 stack meshed as one conforming body with about the same number of dofs. "
-                   "Seconds, max over ranks; total = the sum of the phases; x merged = total / the merged body's "
+                   "Seconds, max over ranks; total = the sum of the phases (exclusive: search and rows are not counted "
+                   "again in solve, as they were in tables before session 4); x merged = total / the merged body's "
                    "total; solve includes the residual/Jacobian contact products; memory = peak resident set over "
                    f"all ranks, MiB; {loads[0]} before, {loads[1]} after)")
     write_table(ROOT / "docs" / "performance.md", args.title, "bench_contact.py", description,
