@@ -50,6 +50,21 @@ def _owned_marked(template, dofs):
     return owned
 
 
+def add_hypre_defaults():
+    """Put the HYPRE_DEFAULTS that the options do not set into the database under qsc_; returns the names
+    added, for remove_defaults once the PC has read them (they never outlive that PC's set-up)."""
+    opts = PETSc.Options()
+    added = [key for key in HYPRE_DEFAULTS if not opts.hasName("qsc_" + key)]
+    for key in added:
+        opts.setValue("qsc_" + key, HYPRE_DEFAULTS[key])
+    return added
+
+
+def remove_defaults(added):
+    for key in added:
+        PETSc.Options().delValue("qsc_" + key)
+
+
 def band_dofs(K, couplings, layers=1):
     """This rank's owned dofs (global, sorted) of the contact band: every row the contact couplings (Mats
     with K's row layout, e.g. G^T G) touch and its coupling partners, grown by `layers` rings of K's
@@ -145,13 +160,7 @@ def install_band_pc(ksp, K, couplings, layers, comm):
     the new rows."""
     band = band_dofs(K, couplings, layers)
     krylov = effective_option("ksp_type")
-    hypre = HYPRE_DEFAULTS if amg_type() == "hypre" else {}
-    opts = PETSc.Options()
-    added = []                          # multigrid defaults: read once below, then removed (see the end)
-    for key, value in hypre.items():
-        if not opts.hasName("qsc_" + key):
-            opts.setValue("qsc_" + key, value)
-            added.append(key)
+    added = add_hypre_defaults() if amg_type() == "hypre" else []   # read once below, then removed
     pc = PETSc.PC().create(comm=comm)
     pc.setOptionsPrefix("qsc_")
     pc.setType("composite")
@@ -167,7 +176,6 @@ def install_band_pc(ksp, K, couplings, layers, comm):
     amg.setOptionsPrefix("qsc_")         # -qsc_pc_hypre_* / -qsc_pc_gamg_* tune it as they tune a plain PC
     exact.setPythonContext(BandSolve(band, comm))
     set_from_options(amg, "contact band's multigrid (-qsc_pc_*)")
-    for key in added:                   # BoomerAMG has read them; the next solve (maybe CG) decides afresh
-        opts.delValue("qsc_" + key)
+    remove_defaults(added)              # BoomerAMG has read them
     ksp.setPC(pc)
     return comm.allreduce(len(band))

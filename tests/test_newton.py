@@ -43,3 +43,23 @@ def test_krylov_stops_at_the_newton_target(tmp_path):
     run, _ = run_scene(scene_without_petsc(tmp_path, 'ksp_atol = "1e-40"'), tmp_path / "user", SMALL)
     assert run.system.snes.getKSP().getTolerances()[1] == 1e-40
     assert not PETSc.Options().hasName("qsc_ksp_atol")      # the scene's option left with its run
+
+
+def test_named_boomeramg_gets_the_tuned_defaults(tmp_path):
+    """-qsc_pc_type hypre without contact pairs gets the band's BoomerAMG defaults (HMIS, l1-Gauss-Seidel),
+    which leave the options database once read; an option the user sets wins."""
+    from qsc_petsc.preconditioner import HYPRE_DEFAULTS
+
+    def pc_view(sets):
+        run, _ = run_scene(CONFIGS / "block_compression.toml", tmp_path / "out", sets)
+        path = tmp_path / "pc.txt"
+        viewer = PETSc.Viewer().createASCII(str(path))
+        run.system.snes.getKSP().getPC().view(viewer)
+        viewer.destroy()
+        run.destroy()
+        return path.read_text()
+
+    text = pc_view(["petsc.pc_type=hypre"])
+    assert "HMIS" in text and "l1-Gauss-Seidel" in text
+    assert not any(PETSc.Options().hasName("qsc_" + key) for key in HYPRE_DEFAULTS)
+    assert "PMIS" in pc_view(["petsc.pc_type=hypre", "petsc.pc_hypre_boomeramg_coarsen_type=PMIS"])
