@@ -163,6 +163,7 @@ def test_elastic_probe_reads_hertz_and_the_block_plane_band():
     coarse block's symmetry-plane nodes above the next row (measured: 1.111 against 1.062; the band of
     docs/verification.md, present without contact)."""
     import sys
+
     from conftest import ROOT
     sys.path.insert(0, str(ROOT / "scripts"))
     from hertz import elastic_probe
