@@ -206,20 +206,31 @@ class System:
         self._match_krylov_to_newton(snes)
         if not self.terms:
             return
-        mine = np.array([not np.array_equal(term.d, held) for term, held in zip(self.terms, self.jacobian_d)])
+        # per term: 1 if its rows' stiffnesses changed, 2 if some row opened (a stiffness fell)
+        mine = np.array([0 if np.array_equal(term.d, held) else 2 if np.any(term.d < held) else 1
+                         for term, held in zip(self.terms, self.jacobian_d)], dtype=np.int64)
         changed = np.zeros_like(mine)
-        self.comm.Allreduce(mine, changed, op=MPI.LOR)
+        self.comm.Allreduce(mine, changed, op=MPI.MAX)
         if not changed.any():
             return        # J untouched: its state is unchanged, so PCSetUp keeps the preconditioner too
         self.jacobian_rebuilds += 1
+        if changed.max() == 2:
+            # a row opened: subtracting its penalty (1e2-1e10 x K) would leave round-off of that size in J,
+            # enough to make a free body's singular J solvable and its iterates jump; rebuild from K instead
+            J.zeroEntries()
+            J.axpy(1.0, self.K, SUBSET)
+            held = [np.zeros_like(term.d) for term in self.terms]
+            changed = np.ones_like(changed)
+        else:
+            held = self.jacobian_d
         for i in np.flatnonzero(changed):
             # J += G^T diag(d - d_held) G, held dofs' rows and columns left out (K's are already identity)
             term = self.terms[i]
-            Jc = term.jacobian(term.d - self.jacobian_d[i])
+            Jc = term.jacobian(term.d - held[i])
             Jc.zeroRowsColumns(self.bc_dofs, 0.0)
             J.axpy(1.0, Jc, SUBSET)
             Jc.destroy()
-            self.jacobian_d[i] = term.d.copy()
+        self.jacobian_d = [term.d.copy() for term in self.terms]
         for term in self.terms:
             term.start = False
 

@@ -377,7 +377,8 @@ def table_alpha(args):
                 "patch test, 2 layers per block, lower/upper in-plane cells 4/4 (matching) and 4/7, "
                 "quasi_symmetric, one load step, serial. MUMPS: `preonly` + LU. cond2(J): the 2-norm "
                 "condition number of the final Jacobian restricted to the free dofs, from a dense SVD "
-                "(numpy) -- exact, not an estimate. CG + GAMG (rtol 1e-10): Newton and Krylov iterations, "
+                "(numpy) -- exact, not an estimate. CG + GAMG (rtol 1e-10; composed with the exact solve on the contact band, the default when gamg "
+                "is named with contact pairs): Newton and Krylov iterations, "
                 "the outcome, du = max \\|u_GAMG - u_MUMPS\\| / max \\|u_MUMPS\\|, and sigma_max/sigma_min of the "
                 "GAMG-preconditioned operator estimated by CG's Lanczos process (`KSPComputeExtremeSingularValues`, last linear solve). pen: |mean slave "
                 "row penetration / (p/eps_n) - 1| (matching meshes only); force: |total contact force - pA|/pA",
