@@ -211,6 +211,8 @@ class System:
                          for term, held in zip(self.terms, self.jacobian_d)], dtype=np.int64)
         changed = np.zeros_like(mine)
         self.comm.Allreduce(mine, changed, op=MPI.MAX)
+        for term in self.terms:
+            term.start = False      # the closed start was this iterate's; the next residual sees the true set
         if not changed.any():
             return        # J untouched: its state is unchanged, so PCSetUp keeps the preconditioner too
         self.jacobian_rebuilds += 1
@@ -231,8 +233,6 @@ class System:
             J.axpy(1.0, Jc, SUBSET)
             Jc.destroy()
         self.jacobian_d = [term.d.copy() for term in self.terms]
-        for term in self.terms:
-            term.start = False
 
     def _match_krylov_to_newton(self, snes):
         """Stop the linear solve once its residual, the next Newton residual while the active set holds, is

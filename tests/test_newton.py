@@ -63,3 +63,14 @@ def test_named_boomeramg_gets_the_tuned_defaults(tmp_path):
     assert "HMIS" in text and "l1-Gauss-Seidel" in text
     assert not any(PETSc.Options().hasName("qsc_" + key) for key in HYPRE_DEFAULTS)
     assert "PMIS" in pc_view(["petsc.pc_type=hypre", "petsc.pc_hypre_boomeramg_coarsen_type=PMIS"])
+
+
+def test_no_solve_ends_in_the_closed_start(tmp_path):
+    """The closed start (every row within reach closed, either sign) is the first iterate's only: a kept
+    Jacobian (augmented Lagrangian re-solves start from the set they ended with) must not keep it, or the
+    re-solve would converge to the glued problem."""
+    run, summary = run_scene(CONFIGS / "patch_test.toml", tmp_path / "out",
+                             ['contact.0.enforcement="augmented_lagrangian"'])
+    assert summary["status"] == "ok"
+    assert any(s["augmented_iterations"] > 0 for step in summary["steps"] for s in step["solves"])
+    assert not any(term.start for term in run.system.terms)
