@@ -114,7 +114,9 @@ class BandSolve:
             set_from_options(ksp, "contact band's solve (-qsc_band_*)")
             self.ksp = ksp
             self.xb, self.yb = self.sub.createVecs()
-            self.scatter = PETSc.Scatter().create(P.createVecRight(), self.iset, self.xb, None)
+            whole = P.createVecRight()
+            self.scatter = PETSc.Scatter().create(whole, self.iset, self.xb, None)
+            whole.destroy()
         else:
             self.ksp.setOperators(self.sub)
         self.ksp.setUp()
@@ -159,6 +161,8 @@ def install_band_pc(ksp, K, couplings, layers, comm):
     multiplicative one. Returns the global number of band dofs. A fresh PC per search: the band follows
     the new rows."""
     band = band_dofs(K, couplings, layers)
+    if comm.allreduce(len(band)) == 0:
+        return 0                        # no row within reach: nothing stiff to take out, plain options
     krylov = effective_option("ksp_type")
     added = add_hypre_defaults() if amg_type() == "hypre" else []   # read once below, then removed
     pc = PETSc.PC().create(comm=comm)
