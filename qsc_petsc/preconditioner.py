@@ -99,26 +99,26 @@ class BandSolve:
 
     def __init__(self, band, comm):
         self.iset = PETSc.IS().createGeneral(band, comm=comm)
-        self.sub = self.ksp = self.scatter = self.xb = self.yb = None
+        ksp = PETSc.KSP().create(comm=comm)
+        ksp.setOptionsPrefix("qsc_band_")
+        ksp.setType("preonly")
+        ksp.getPC().setType("cholesky")
+        ksp.getPC().setFactorSolverType("mumps")
+        # read here, at the search, not in setUp: an error inside PETSc's solve callbacks would reach one
+        # rank's Python while the others wait in the factorization
+        set_from_options(ksp, "contact band's solve (-qsc_band_*)")
+        self.ksp = ksp
+        self.sub = self.scatter = self.xb = self.yb = None
 
     def setUp(self, pc):
         _, P = pc.getOperators()
         self.sub = P.createSubMatrix(self.iset, self.iset, submat=self.sub)
-        if self.ksp is None:
-            ksp = PETSc.KSP().create(comm=P.getComm())
-            ksp.setOptionsPrefix("qsc_band_")
-            ksp.setType("preonly")
-            ksp.getPC().setType("cholesky")
-            ksp.getPC().setFactorSolverType("mumps")
-            ksp.setOperators(self.sub)
-            set_from_options(ksp, "contact band's solve (-qsc_band_*)")
-            self.ksp = ksp
+        self.ksp.setOperators(self.sub)
+        if self.scatter is None:
             self.xb, self.yb = self.sub.createVecs()
             whole = P.createVecRight()
             self.scatter = PETSc.Scatter().create(whole, self.iset, self.xb, None)
             whole.destroy()
-        else:
-            self.ksp.setOperators(self.sub)
         self.ksp.setUp()
 
     def apply(self, pc, x, y):

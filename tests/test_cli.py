@@ -387,3 +387,17 @@ def test_bad_petsc_option_is_an_input_error(tmp_path, option):
     assert proc.returncode == 2
     assert "qsc: error: PETSc options of the solver" in proc.stdout
     assert "Traceback" not in proc.stderr + proc.stdout
+
+
+@pytest.mark.skipif(MPIRUN is None, reason="mpirun not found")
+def test_bad_band_option_ends_every_rank_with_exit_2(tmp_path):
+    """A -qsc_band_* option PETSc refuses is read at the search, before any solve: every rank ends with exit 2
+    and one error line (read inside the solve's callbacks it crashed the other rank)."""
+    serial_only()
+    code, out = run_qsc(["run", CONFIGS / "two_cubes_dies.toml", "--out", tmp_path / "out", "-qsc_ksp_type", "gmres",
+                         "-qsc_pc_type", "hypre", "-qsc_band_pc_type", "nonexistent"], 2, tmp_path, 60.0)
+    assert code == 2, out
+    assert "Traceback" not in out and "SEGV" not in out, out
+    errors = [line for line in own_lines(out) if line.startswith("qsc: error: ")]
+    assert errors == ["qsc: error: PETSc options of the contact band's solve (-qsc_band_*): an unknown type "
+                      "(PETSc error 86; PETSc's message above names the option)"], out
