@@ -399,5 +399,6 @@ def test_bad_band_option_ends_every_rank_with_exit_2(tmp_path):
     assert code == 2, out
     assert "Traceback" not in out and "SEGV" not in out, out
     errors = [line for line in own_lines(out) if line.startswith("qsc: error: ")]
-    assert errors == ["qsc: error: PETSc options of the contact band's solve (-qsc_band_*): an unknown type "
-                      "(PETSc error 86; PETSc's message above names the option)"], out
+    expected = ("qsc: error: PETSc options of the contact band's solve (-qsc_band_*): an unknown type "
+                "(PETSc error 86; PETSc's message above names the option)")
+    assert errors == [expected], out
