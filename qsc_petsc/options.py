@@ -79,8 +79,10 @@ def options_text(options, from_scene):
 
 
 # PETSc error codes that setFromOptions raises for a bad option: wrong argument, out of range (a value
-# that does not parse), unknown type (a misspelt or missing solver package)
-_OPTION_ERRORS = {62: "a wrong argument", 63: "a value out of range or not a number", 86: "an unknown type"}
+# that does not parse), a value that is none of the option's choices, unknown type (a misspelt or
+# missing solver package)
+_OPTION_ERRORS = {62: "a wrong argument", 63: "a value out of range or not a number",
+                  83: "a value that is none of the option's choices", 86: "an unknown type"}
 
 
 def set_from_options(obj, what):

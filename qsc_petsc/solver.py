@@ -18,6 +18,7 @@ SNES_REASONS = {v: k for k, v in vars(PETSc.SNES.ConvergedReason).items() if not
 KSP_REASONS = {v: k for k, v in vars(PETSc.KSP.ConvergedReason).items() if not k.startswith("_")}
 SUBSET = PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN
 PETSC_ERR_NOT_CONVERGED = 91   # raised instead of a reason under -qsc_ksp/snes_error_if_not_converged
+PETSC_ERR_MISSING_FACTOR = 92  # MatGetFactor: no package provides that factorization of that matrix type
 # MUMPS INFOG(1) when one of its work arrays was too small (numerical pivoting delayed more pivots than the
 # analysis foresaw): more memory relaxation ICNTL(14) cures it; measured on a 1.7k-dof patch test on 3 ranks
 MUMPS_WORKSPACE_ERRORS = (-8, -9, -14, -15, -17, -20)
@@ -291,6 +292,11 @@ class System:
             try:
                 self.snes.solve(None, u)
             except PETSc.Error as exc:     # on every rank: the reason is collective; a failed solve like any other
+                if exc.ierr == PETSC_ERR_MISSING_FACTOR:     # met at the first factorization, on every rank
+                    raise SceneError("the PETSc options ask for a factorization that no installed package "
+                                     "provides (PETSc error 92; PETSc's message above names the matrix and "
+                                     "package): check -qsc_pc_factor_mat_solver_type and "
+                                     "-qsc_band_pc_factor_mat_solver_type") from None
                 if exc.ierr != PETSC_ERR_NOT_CONVERGED:
                     raise
             if self.snes.getConvergedReason() > 0 or not self._more_mumps_workspace():
