@@ -43,12 +43,13 @@ def init_petsc(petsc_args):
     return PETSc
 
 
-def insert_scene_options(scene_options):
-    """Put the scene's [petsc] options under the qsc_ prefix, unless the command line set them."""
+def insert_options(defaults):
+    """Put options {key: value} under the qsc_ prefix, unless the database has them already (command line,
+    scene); returns {name: value} of those inserted, for remove_options."""
     from petsc4py import PETSc
     opts = PETSc.Options()
     inserted = {}
-    for key, value in scene_options.items():
+    for key, value in defaults.items():
         name = PREFIX + key
         if not opts.hasName(name):
             opts.setValue(name, value)
@@ -57,7 +58,7 @@ def insert_scene_options(scene_options):
 
 
 def remove_options(names):
-    """Take options a scene inserted back out of the database (an in-process run must not leak them)."""
+    """Take options insert_options put in back out of the database (an in-process run must not leak them)."""
     from petsc4py import PETSc
     opts = PETSc.Options()
     for name in names:

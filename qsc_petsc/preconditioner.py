@@ -22,7 +22,7 @@ options (`-qsc_pc_*`); the band is one submatrix across all ranks, factored once
 import numpy as np
 from petsc4py import PETSc
 
-from .options import set_from_options
+from .options import insert_options, remove_options, set_from_options
 
 AMG_TYPES = ("hypre", "gamg")        # the band's partner: the first is the default
 # BoomerAMG: cheaper V-cycles than hypre's defaults (about half the operator complexity, measured) at the
@@ -48,21 +48,6 @@ def _owned_marked(template, dofs):
     owned = np.flatnonzero(mark.getArray() > 0) + mark.getOwnershipRange()[0]
     mark.destroy()
     return owned
-
-
-def add_hypre_defaults():
-    """Put the HYPRE_DEFAULTS that the options do not set into the database under qsc_; returns the names
-    added, for remove_defaults once the PC has read them (they never outlive that PC's set-up)."""
-    opts = PETSc.Options()
-    added = [key for key in HYPRE_DEFAULTS if not opts.hasName("qsc_" + key)]
-    for key in added:
-        opts.setValue("qsc_" + key, HYPRE_DEFAULTS[key])
-    return added
-
-
-def remove_defaults(added):
-    for key in added:
-        PETSc.Options().delValue("qsc_" + key)
 
 
 def band_dofs(K, couplings, layers=1):
@@ -164,7 +149,7 @@ def install_band_pc(ksp, K, couplings, layers, comm):
     if comm.allreduce(len(band)) == 0:
         return 0                        # no row within reach: nothing stiff to take out, plain options
     krylov = effective_option("ksp_type")
-    added = add_hypre_defaults() if amg_type() == "hypre" else []   # read once below, then removed
+    added = insert_options(HYPRE_DEFAULTS) if amg_type() == "hypre" else {}   # read once below, then removed
     pc = PETSc.PC().create(comm=comm)
     pc.setOptionsPrefix("qsc_")
     pc.setType("composite")
@@ -180,6 +165,6 @@ def install_band_pc(ksp, K, couplings, layers, comm):
     amg.setOptionsPrefix("qsc_")         # -qsc_pc_hypre_* / -qsc_pc_gamg_* tune it as they tune a plain PC
     exact.setPythonContext(BandSolve(band, comm))
     set_from_options(amg, "contact band's multigrid (-qsc_pc_*)")
-    remove_defaults(added)              # BoomerAMG has read them
+    remove_options(added)               # BoomerAMG has read them
     ksp.setPC(pc)
     return comm.allreduce(len(band))

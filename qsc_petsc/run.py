@@ -78,7 +78,7 @@ class Run:
         self.log = log if comm.rank == 0 else (lambda *a, **k: None)
         self.phases = Phases(comm)
         self.out = prepare_output(scene, out_dir, comm)
-        self.from_scene = options.insert_scene_options(scene.petsc)
+        self.from_scene = options.insert_options(scene.petsc)
         try:
             self._build(scene, comm)
         except BaseException:

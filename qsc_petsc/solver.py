@@ -126,16 +126,12 @@ class System:
         self.snes = PETSc.SNES().create(comm=comm)
         self.snes.setOptionsPrefix("qsc_")
         self.snes.setType("newtonls")
-        opts = PETSc.Options()
-        defaults = {
+        options.insert_options({
             "snes_linesearch_type": "basic",          # full semi-smooth Newton steps
             # CG stops on the true residual, so one exact linear solve meets the SNES tolerance
             # (the preconditioned norm left a second Newton step on every linear increment)
             "ksp_norm_type": "unpreconditioned",
-        }
-        for key, value in defaults.items():
-            if not opts.hasName("qsc_" + key):
-                opts.setValue("qsc_" + key, value)
+        })
         self.snes.setTolerances(rtol=1e-10, atol=1e-50, stol=1e-10, max_it=max_it)
         ksp = self.snes.getKSP()
         ksp.setType("cg")
@@ -150,11 +146,11 @@ class System:
         # a named BoomerAMG gets the tuned defaults too (two cubes merged, 212k dofs, CG: 11.3 s against 33 s
         # with hypre's own and 17-22 s with GAMG, docs/performance.md)
         named_hypre = preconditioner.effective_option("pc_type") == "hypre"
-        added = preconditioner.add_hypre_defaults() if named_hypre else []
+        added = options.insert_options(preconditioner.HYPRE_DEFAULTS) if named_hypre else {}
         try:
             options.set_from_options(self.snes, "solver (-qsc_snes_*, -qsc_ksp_*, -qsc_pc_*)")
         finally:
-            preconditioner.remove_defaults(added)
+            options.remove_options(added)
 
     def set_terms(self, terms):
         """Install the constraint terms of a new search; rebuild the Jacobian's sparsity once.

@@ -160,8 +160,9 @@ def _tested_rows(pss, scale, test_nodes, test_shape):
         return _ints(), _ints(), np.zeros(0), _ints(), np.zeros(0), _ints(), np.zeros(0)
     faces = np.concatenate([pss.source_nodes, pss.target_nodes], axis=1)
     _, first, pair = np.unique(faces, axis=0, return_index=True, return_inverse=True)
-    order = np.argsort(pair.reshape(-1), kind="stable")
-    starts = np.flatnonzero(np.r_[True, np.diff(pair.reshape(-1)[order]) != 0])
+    pair = pair.reshape(-1)
+    order = np.argsort(pair, kind="stable")
+    starts = np.flatnonzero(np.r_[True, np.diff(pair[order]) != 0])
 
     def summed(x):
         return np.add.reduceat(x[order], starts, axis=0)
