@@ -32,13 +32,14 @@ from . import fem
 from .errors import MeshError
 
 PARTS = ("sphere", "block")
-LEVELS = ("coarse", "medium", "fine")
+LEVELS = ("coarse", "medium", "fine", "xfine")
 CONTACT_ZONE = 0.15        # radius of the contact surfaces, in units of R
 BLOCK_SIZE = 2.0           # block width L and depth H, in units of R
 # Element size on the contact surfaces, in units of R, per level: (sphere, block). The block is
 # 1.4x coarser, so the two surfaces never match; a is about 0.1 R, so coarse has 4 sphere
-# elements across the contact radius, fine 16.
-SIZES = {"coarse": (0.025, 0.035), "medium": (0.0125, 0.0175), "fine": (0.00625, 0.00875)}
+# elements across the contact radius, fine 16, xfine 32 (each level halves the sizes of the one before).
+SIZES = {"coarse": (0.025, 0.035), "medium": (0.0125, 0.0175), "fine": (0.00625, 0.00875),
+         "xfine": (0.003125, 0.004375)}
 FAR_SIZE = {"sphere": 0.2, "block": 0.5}   # element size far from the contact, in units of R
 GROWTH = 0.35              # the size grows by this much per unit distance beyond the zone (relative to R)
 GENERATOR_VERSION = 1      # bump when the geometry or the meshing changes

@@ -416,8 +416,8 @@ BODY = Table({
             "part": Choice(("sphere", "block"), "Part of the Hertz benchmark (qsc_petsc/hertz.py): the quarter "
                            "sphere (surfaces xmin ymin top contact outer) or the quarter block (xmin ymin zmin "
                            "xmax ymax contact top)."),
-            "level": Choice(("coarse", "medium", "fine"), "Element size at the contact: 1/4, 1/8 or 1/16 of "
-                            "a = 0.1 R on the sphere, 1.4x that on the block.", default="coarse"),
+            "level": Choice(("coarse", "medium", "fine", "xfine"), "Element size at the contact: 1/4, 1/8, 1/16 "
+                            "or 1/32 of a = 0.1 R on the sphere, 1.4x that on the block.", default="coarse"),
             "radius": Float("Sphere radius R; every dimension of both parts scales with it.", gt=0, default=1.0,
                             unit="m"),
             "cache": Str("Folder of the generated .msh files, made with gmsh when missing; relative to the "

@@ -171,3 +171,35 @@ def test_elastic_probe_reads_hertz_and_the_block_plane_band():
     for part in ("sphere", "block"):
         assert 0.95 < stats[part]["interior_mean"] < 1.10, (part, stats[part])
     assert stats["block"]["edge_mean"] > stats["block"]["row_mean"] + 0.02, stats["block"]
+
+
+def test_levels_form_one_refinement_series_and_xfine_runs_iteratively():
+    """Each mesh level shall halve both parts' contact element sizes of the level before, at the same sphere / block
+    ratio (1 / 1.4, never matching), so that xfine (h = a / 32 on the sphere) continues the coarse-medium-fine series;
+    its generator parameters shall hash to their own cache file; configs/hertz_xfine.toml shall be hertz_fine at
+    level xfine without a [petsc] table (the iterative default, no MUMPS), and scripts/hertz.py shall run only the
+    symmetric formulations' segment rows there."""
+    assert hertz.LEVELS == ("coarse", "medium", "fine", "xfine")
+    for coarser, finer in zip(hertz.LEVELS, hertz.LEVELS[1:]):
+        assert np.allclose(np.divide(hertz.SIZES[coarser], hertz.SIZES[finer]), 2.0), (coarser, finer)
+    for level in hertz.LEVELS:
+        sphere, block = hertz.SIZES[level]
+        assert block / sphere == pytest.approx(1.4)
+    assert hertz.parameters("sphere", "xfine", 1.0)["size"] == pytest.approx(0.1 / 32)
+    assert hertz.mesh_path("block", "xfine", 1.0, "c") != hertz.mesh_path("block", "fine", 1.0, "c")
+
+    xfine, fine = load_scene(CONFIGS / "hertz_xfine.toml"), load_scene(CONFIGS / "hertz_fine.toml")
+    assert [b.mesh.level for b in xfine.bodies] == ["xfine", "xfine"]
+    assert fine.petsc.get("pc_factor_mat_solver_type") == "mumps"
+    assert not {"ksp_type", "pc_type", "pc_factor_mat_solver_type"} & set(xfine.petsc)
+    same = load_scene(CONFIGS / "hertz_fine.toml", ["bodies.0.mesh.level=xfine", "bodies.1.mesh.level=xfine",
+                                                    "name=hertz_xfine"])
+    assert same.to_dict() | {"petsc": None} == xfine.to_dict() | {"petsc": None}
+
+    import sys
+
+    from conftest import ROOT
+    sys.path.insert(0, str(ROOT / "scripts"))
+    import hertz as script
+    assert script.LEVELS == hertz.LEVELS
+    assert script.LEVEL_CASES["xfine"] == [("two_pass", "segment"), ("quasi_symmetric", "segment")]
