@@ -9,7 +9,7 @@ import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from . import elasticity, fem, sparsity
+from . import elasticity, fem, lattice, sparsity
 from .expression import compile_expression
 from .mesh import on_all
 
@@ -108,6 +108,75 @@ def stiffness_matrix(mesh, lmbda, mu):
         csr = ((di, cols[:n_d], vals[:n_d]), (oi, cols[n_d:], vals[n_d:]))
     A = PETSc.Mat().createAIJWithArrays(size, csr, comm=comm)
     A.setBlockSizes(3, 3)          # createAIJWithArrays ignores bsize; GAMG aggregates by it
+    A.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, True)
+    return A
+
+
+def lattice_stiffness_matrix(mesh, lattices):
+    """The elastic stiffness K of a mesh made only of generated hex boxes, read from row templates
+    (lattice.py): the same matrix as stiffness_matrix up to round-off, without summing element blocks.
+
+    Every owned vertex row is complete on its owner (the templates know the cells of other ranks),
+    so no values are sent; the global numbers of the neighbours come from a PETSc application
+    ordering (original vertex id -> PETSc vertex number). A row whose neighbours are all owned
+    and numbered in lattice order (distribute_mesh numbers owned vertices in original order: most
+    rows) is its template as it stands, and runs of such rows with one template are written as
+    one broadcast; the other rows are gathered block by block."""
+    comm = mesh.comm
+    v0, v1 = mesh.vertex_range
+    own = np.flatnonzero(mesh.owned)
+    own = own[np.argsort(mesh.gvert[own])]                   # row r is global vertex v0 + r
+    orig = mesh.vert_orig[own].astype(np.int64)
+    ends = np.array([b.offset for b in lattices] + [lattices[-1].offset + lattices[-1].n_vertices])
+    body = np.searchsorted(ends, orig, side="right") - 1
+    n, nt = len(own), 27 * len(lattices)
+    T, P = np.empty((nt, 3, 27, 3)), np.empty((nt, 27), bool)
+    tid, step = np.empty(n, np.int64), np.empty((n, 27), np.int64)
+    for b, box in enumerate(lattices):
+        T[27 * b:27 * b + 27], P[27 * b:27 * b + 27] = lattice.templates(box.Ke)
+        mine = body == b
+        tid[mine] = 27 * b + lattice.vertex_classes(box, orig[mine] - box.offset)
+        step[mine] = lattice.OFFSETS @ box.stride
+    valid = P[tid]
+    ao = PETSc.AO().createBasic(mesh.vert_orig[mesh.owned].astype(PETSc.IntType),
+                                mesh.gvert[mesh.owned].astype(PETSc.IntType), comm=comm)
+    gcol = np.asarray(ao.app2petsc(np.where(valid, orig[:, None] + step, 0).ravel().astype(PETSc.IntType)),
+                      np.int64).reshape(n, 27)
+    ao.destroy()
+    # one sort per row orders the blocks as PETSc's split CSR wants them: diagonal part, off-diagonal
+    # part, absent ones last, each by column; the offset index rides in the low bits
+    part = np.where(~valid, 2, np.where((gcol >= v0) & (gcol < v1), 0, 1))
+    key = (part << 58) | (gcol << 5) | np.arange(27)
+    key.sort(axis=1)
+    d, part, gcol = key & 31, key >> 58, (key >> 5) & ((1 << 53) - 1)
+    n_diag, n_off = (part == 0).sum(axis=1), (part == 1).sum(axis=1)
+    natural = (n_off == 0) & ((d[:, 1:] > d[:, :-1]) | (part[:, 1:] == 2)).all(axis=1)
+    rowptr_d, rowptr_o = (np.concatenate([[0], np.cumsum(c)]) for c in (n_diag, n_off))
+    vals_d, cols_d = np.empty(9 * rowptr_d[-1]), np.empty(9 * rowptr_d[-1], PETSc.IntType)
+    runs = sparsity.equal_runs(tid, natural)
+    trip = np.arange(3, dtype=PETSc.IntType)
+    for a, b in runs:
+        nb, p0, p1 = n_diag[a], 9 * rowptr_d[a], 9 * rowptr_d[b]
+        vals_d[p0:p1].reshape(b - a, -1)[:] = T[tid[a]][:, P[tid[a]]].ravel()
+        cols_d[p0:p1].reshape(b - a, 3, nb, 3)[:] = (3 * (gcol[a:b, :nb] - v0))[:, None, :, None] + trip
+    odd = np.flatnonzero(~sparsity.covered(runs, n))
+    sel = (part[odd] == 0)[:, None, :]
+    blocks = T[tid[odd, None, None], np.arange(3)[:, None], d[odd, None, :]]     # (rows, 3, 27, 3)
+    col0 = np.where(part[odd] == 0, 3 * (gcol[odd] - v0), 3 * gcol[odd]).astype(PETSc.IntType)[:, None, :, None] + trip
+    col0 = np.broadcast_to(col0, blocks.shape)
+    lens = 9 * n_diag[odd]
+    at = np.repeat(9 * rowptr_d[odd] - np.cumsum(lens) + lens, lens) + np.arange(lens.sum())
+    vals_d[at] = blocks[np.broadcast_to(sel[..., None], blocks.shape)]
+    cols_d[at] = col0[np.broadcast_to(sel[..., None], blocks.shape)]
+    di = sparsity.point_rowptr(rowptr_d, n_diag).astype(PETSc.IntType)
+    csr = (di, cols_d, vals_d)
+    if comm.size > 1:
+        off = np.broadcast_to((part[odd] == 1)[:, None, :, None], blocks.shape)
+        oi = sparsity.point_rowptr(rowptr_o, n_off).astype(PETSc.IntType)
+        csr = (csr, (oi, col0[off], blocks[off]))
+    size = ((3 * n, 3 * mesh.n_vertices), (3 * n, 3 * mesh.n_vertices))
+    A = PETSc.Mat().createAIJWithArrays(size, csr, comm=comm)
+    A.setBlockSizes(3, 3)
     A.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, True)
     return A
 

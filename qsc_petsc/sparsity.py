@@ -161,6 +161,8 @@ def row_batches(cptr, size):
 
 def equal_runs(nb, plain, offset=0):
     """Maximal runs [(a, b), ...] (plus offset) of at least MIN_RUN consecutive plain rows with equal nb."""
+    if len(nb) == 0:
+        return []
     start = np.flatnonzero(np.r_[True, (nb[1:] != nb[:-1]) | (plain[1:] != plain[:-1])])
     end = np.append(start[1:], len(nb))
     keep = plain[start] & (end - start >= MIN_RUN)

@@ -8,7 +8,7 @@ from conftest import CONFIGS, all_close
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from qsc_petsc import assembly, elasticity, sparsity
+from qsc_petsc import assembly, elasticity, lattice, sparsity
 from qsc_petsc.mesh import distribute_mesh
 from qsc_petsc.scene import load_scene
 
@@ -86,6 +86,43 @@ def test_stiffness_matrix_equals_dense_assembly(comm, monkeypatch, case, batch):
     assert A.getBlockSize() == 3
     assert A.getSize() == K.shape
     A.destroy()
+
+
+LATTICE_CASES = {
+    "one cell": ("block_compression.toml", ["bodies.0.mesh.cells=[1,1,1]"]),
+    "a rank may hold none": ("block_compression.toml", ["bodies.0.mesh.cells=[1,1,2]"]),
+    "one cell thick, unequal sides": ("block_compression.toml", ["bodies.0.mesh.cells=[5,1,3]",
+                                                                  "bodies.0.mesh.size=[2.0,0.3,1.0]"]),
+    "hex box": ("block_compression.toml", ["bodies.0.mesh.cells=[4,3,5]"]),
+    "two bodies, one rotated and stiffer": ("two_cubes_dies.toml", TWO_BODIES),
+}
+
+
+@pytest.mark.parametrize("case", LATTICE_CASES)
+def test_box_stencils_equal_dense_assembly(comm, case):
+    """Generated hex boxes read from row templates shall give the element-by-element stiffness to
+    round-off with the exact pattern, on any number of ranks."""
+    scene = load_scene(CONFIGS / LATTICE_CASES[case][0], LATTICE_CASES[case][1])
+    mesh = distribute_mesh(scene, comm)
+    lattices = lattice.box_lattices(scene)
+    assert lattices is not None
+    A = assembly.lattice_stiffness_matrix(mesh, lattices)
+    K = dense_reference(mesh, *assembly.cell_materials(mesh, scene))
+    rows, r0 = owned_dense(A, len(K))
+    err = comm.allreduce(float(np.abs(rows - K[r0:r0 + len(rows)]).max(initial=0.0)), op=MPI.MAX)
+    assert err <= 1e-13 * np.abs(K).max()
+    assert comm.allreduce(int(A.getValuesCSR()[0][-1]), op=MPI.SUM) == 9 * vertex_pairs(mesh)
+    assert A.getBlockSize() == 3
+    A.destroy()
+
+
+@pytest.mark.parametrize("scene_file, sets", [
+    ("block_compression.toml", ["bodies.0.mesh.element=tet"]),
+    ("hertz_coarse.toml", []),
+])
+def test_box_stencils_only_for_hex_boxes(scene_file, sets):
+    """Tetrahedra and meshes read from files shall take the element-block assembly (no templates)."""
+    assert lattice.box_lattices(load_scene(CONFIGS / scene_file, sets)) is None
 
 
 def test_pattern_is_closed(comm):
