@@ -83,7 +83,7 @@ def templates(Ke):
 
 def vertex_classes(lattice, ids):
     """Template class (0-26, see templates) of vertices ids (local to the box: 0 <= ids < n_vertices)."""
-    nx, ny, nz = lattice.cells
+    nx, ny, _ = lattice.cells
     ijk = np.stack([ids % (nx + 1), ids // (nx + 1) % (ny + 1), ids // ((nx + 1) * (ny + 1))], axis=1)
     ends = np.array(lattice.cells)
     cls = np.where(ijk == 0, 0, np.where(ijk == ends, 2, 1))
