@@ -16,6 +16,7 @@ from petsc4py import PETSc
 from . import fem
 from .errors import MeshError, QscError, SceneError
 from .meshgen import box_mesh, read_mesh_file
+from .partition import coordinate_bisection
 
 MAX_SURFACES = 62          # face membership travels as one int64 bitmask per cell face
 
@@ -51,6 +52,7 @@ class LocalMesh:
     n_vertices: int             # global
     n_cells: int                # global
     vertex_range: tuple         # owned global vertex numbers [start, end)
+    partitioner: str = "none"   # what distributed the cells: "coordinate bisection" or PETSc's partitioner type
     _surface_vertices: dict = field(default_factory=dict)
 
     @property
@@ -233,6 +235,15 @@ def distribute_mesh(scene, comm):
 
     partitioner = dm.getPartitioner()
     partitioner.setOptionsPrefix("qsc_")      # -qsc_petscpartitioner_type simple|ptscotch|parmetis|...
+    if comm.size > 1 and not PETSc.Options().hasName("qsc_petscpartitioner_type"):
+        # the default: coordinate bisection of the cells, all of which start on rank 0
+        if comm.rank == 0:
+            part = coordinate_bisection(gm.points[gm.cells].mean(axis=1), comm.size)
+            sizes, points = np.bincount(part, minlength=comm.size), np.argsort(part, kind="stable")
+        else:
+            sizes, points = np.zeros(comm.size), np.zeros(0)
+        partitioner.setType(PETSc.Partitioner.Type.SHELL)
+        partitioner.setShellPartition(comm.size, sizes.astype(PETSc.IntType), points.astype(PETSc.IntType))
     try:
         partitioner.setFromOptions()
         sf = dm.distribute() if comm.size > 1 else None
@@ -283,4 +294,6 @@ def distribute_mesh(scene, comm):
         cells=np.ascontiguousarray(local_cells), cell_body=leaf[c0:c1, nn + nf].copy(),
         cell_orig=leaf[c0:c1, nn + nf + 1].copy(), face_mask=leaf[c0:c1, nn:nn + nf].copy(),
         vert_orig=vert_orig, gvert=gvert, owned=owned, owner=owner,
-        n_vertices=n_vertices, n_cells=n_cells, vertex_range=(vstart, vstart + n_owned))
+        n_vertices=n_vertices, n_cells=n_cells, vertex_range=(vstart, vstart + n_owned),
+        partitioner="none" if comm.size == 1 else
+        "coordinate bisection" if partitioner.getType() == PETSc.Partitioner.Type.SHELL else partitioner.getType())

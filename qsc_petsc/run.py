@@ -123,7 +123,7 @@ class Run:
             "petsc": ".".join(map(str, PETSc.Sys.getVersion())), "ranks": self.comm.size,
             "mesh": {"cell_type": mesh.cell_type, "cells": mesh.n_cells, "vertices": mesh.n_vertices,
                      "dofs": 3 * mesh.n_vertices, "constrained_dofs": self.n_constrained,
-                     "stiffness_assembly": self.stiffness_path,
+                     "stiffness_assembly": self.stiffness_path, "partitioner": mesh.partitioner,
                      "bodies": mesh.body_names,
                      "cells_per_rank": self.comm.allgather(len(mesh.cells)),
                      "dofs_per_rank": self.comm.allgather(3 * int(mesh.owned.sum()))},
