@@ -26,7 +26,7 @@ def check(scene, comm):
              f"mesh: {mesh.n_cells} {mesh.cell_type} cells, {mesh.n_vertices} vertices, {3 * mesh.n_vertices} dofs",
              "bodies: " + ", ".join(f"{n} ({c} cells)" for n, c in zip(mesh.body_names, bodies)),
              "surfaces: " + ", ".join(f"{n} ({k} faces)" for n, k in surfaces.items()),
-             f"partition over {comm.size} rank(s) ({mesh.partitioner}):"]
+             f"partition over {comm.size} rank(s)" + (f" ({mesh.partitioner}):" if comm.size > 1 else ":")]
     for r in range(comm.size):
         lines.append(f"  rank {r}: {cells[r]} cells, {3 * owned[r]} owned dofs, {ghosts[r]} ghost vertices")
     lines.append(f"  balance (max/mean owned dofs): {max(owned) / max(np.mean(owned), 1):.3f}")
