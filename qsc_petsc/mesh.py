@@ -265,15 +265,8 @@ def distribute_mesh(scene, comm):
     order = np.argsort(vert_orig)
     local_cells = order[np.searchsorted(vert_orig, conn_orig, sorter=order)]
 
-    section = PETSc.Section().create(comm=comm)
-    section.setNumFields(1)
-    section.setFieldComponents(0, 3)
-    section.setChart(*dm.getChart())
-    for p in range(v0, v1):
-        section.setDof(p, 3)
-        section.setFieldDof(p, 0, 3)
-    section.setUp()
-    dm.setSection(section)
+    dm.setNumFields(1)                      # createSection counts the DM's fields: one, 3 components on vertices
+    dm.setSection(dm.createSection([3], [3, 0, 0, 0]))
     dofs = dm.getLGMap().getIndices()
     gvert = np.asarray(dofs[0::3], dtype=np.int64) // 3
 
