@@ -14,6 +14,7 @@ from .expression import compile_expression
 from .mesh import on_all
 
 CHUNK = 16384              # cells per vectorised kernel call: bounds temporary memory
+FEW_GROUPS = 64            # congruent cell groups up to which K u goes group by group
 ADD = PETSc.InsertMode.ADD_VALUES
 
 
@@ -327,16 +328,26 @@ def _rank_in_row(pattern, row, cols):
 
 
 def internal_force(mesh, u_local, lmbda, mu):
-    """Element-by-element K u (local, ghosted dof array): reactions need K before constraints."""
-    f = np.zeros(3 * len(mesh.coords))
-    k = mesh.cells.shape[1]
-    for s in range(0, len(mesh.cells), CHUNK):
-        c = np.arange(s, min(s + CHUNK, len(mesh.cells)))
-        ue = u_local.reshape(-1, 3)[mesh.cells[c]].reshape(len(c), 3 * k)
-        Ke = elasticity.stiffness(mesh.cell_type, mesh.coords[mesh.cells[c]], lmbda[c], mu[c])
-        ldofs = (3 * mesh.cells[c][:, :, None] + np.arange(3)).reshape(len(c), -1)
-        np.add.at(f, ldofs.ravel(), np.einsum("mij,mj->mi", Ke, ue).ravel())
-    return f
+    """Element-by-element K u (local, ghosted dof array): reactions need K before constraints.
+
+    Cells in few congruent groups (generated boxes) take one product per group with the group's
+    stiffness; other meshes go chunk by chunk with every cell's own."""
+    m, k = mesh.cells.shape
+    ue = u_local.reshape(-1, 3)[mesh.cells].reshape(m, 3 * k)
+    xe = mesh.coords[mesh.cells]
+    first, group = elasticity.congruent_groups(xe, lmbda, mu) if m else (np.zeros(0, np.int64),) * 2
+    fe = np.empty_like(ue)
+    if len(first) <= FEW_GROUPS:
+        Kg = elasticity.stiffness(mesh.cell_type, xe[first], lmbda[first], mu[first], share_translates=False)
+        for g, Ke in enumerate(Kg):
+            sel = np.flatnonzero(group == g)
+            fe[sel] = ue[sel] @ Ke.T
+    else:
+        for s in range(0, m, CHUNK):
+            c = slice(s, s + CHUNK)
+            fe[c] = np.einsum("mij,mj->mi", elasticity.stiffness(mesh.cell_type, xe[c], lmbda[c], mu[c]), ue[c])
+    ldofs = 3 * mesh.cells[:, :, None] + np.arange(3)
+    return np.bincount(ldofs.ravel(), fe.ravel(), minlength=3 * len(mesh.coords))
 
 
 def triplet_matrix(mesh, rows, cols, vals):
