@@ -43,14 +43,15 @@ def main():
             mem = s["peak_memory_mib"]
             rows.append(f"| {dofs} | {r} | {t['mesh']:.2f} | {t['assembly']:.2f} | {t['solve']:.2f} | "
                         f"{t['output']:.2f} | {wall:.2f} | {step['ksp_iterations']} | {mem['max_rank']:.0f} | "
-                        f"{mem['total']:.0f} | {dofs / max(t['assembly'], 1e-9) / r / 1e6:.2f} |")
+                        f"{mem['total']:.0f} | {dofs / max(t['assembly'], 1e-9) / r / 1e6:.2f} | "
+                        f"{s['mesh']['stiffness_assembly']} | {s['mesh']['partitioner']} |")
             print(rows[-1], flush=True)
     description = ("unit box, Q1 hexes, bottom clamped, pressure on top, CG + GAMG, rtol 1e-10; PETSc options "
                    f"`{args.petsc or '(defaults)'}`. Times in seconds, max over ranks; wall = the whole "
                    "`mpirun qsc run` including Python start-up; memory = peak resident set in MiB")
     write_table(ROOT / "docs" / "performance.md", args.title, "bench_elasticity.py", description,
                 ["dofs", "ranks", "mesh", "assembly", "solve", "output", "wall", "KSP its", "mem/rank max",
-                 "mem total", "assembly Mdofs/s/rank"], rows)
+                 "mem total", "assembly Mdofs/s/rank", "stiffness", "partition"], rows)
 
 
 if __name__ == "__main__":
