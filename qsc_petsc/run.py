@@ -100,7 +100,9 @@ class Run:
             u = K.createVecRight()
             self.f_ext = assembly.surface_load(mesh, scene, u)
             self.bc_dofs, bc_values, self.bc_per_boundary = assembly.dirichlet_dofs(mesh, scene)
-            nullspace = assembly.rigid_body_modes(mesh, u)
+            held = [(surface, None if die.condition == "sticking" else np.asarray(die.normal, float))
+                    for die in scene.die for surface in die.surfaces]
+            nullspace = assembly.rigid_body_modes(mesh, u, held)
             self.system = System(K, self.f_ext, self.bc_dofs, bc_values, nullspace, comm,
                                  scene.solver.max_active_set_iterations, scene.solver.contact_preconditioner,
                                  scene.solver.contact_band_layers)
