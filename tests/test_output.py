@@ -101,6 +101,7 @@ def test_summary_contents(serial):
     scene = load_scene(PATCH, OVERRIDES)
     assert summary["scene"] == "patch_test" and summary["status"] == "ok" and summary["ranks"] == 1
     assert summary["mesh"]["dofs"] == 3 * summary["mesh"]["vertices"] == sum(summary["mesh"]["dofs_per_rank"])
+    assert summary["mesh"]["stiffness_assembly"] == "box stencils" and summary["mesh"]["partitioner"] == "none"
     assert [s["step"] for s in summary["steps"]] == [1, 2]
     assert [s["load_factor"] for s in summary["steps"]] == [0.5, 1.0]
     for step in summary["steps"]:
@@ -180,6 +181,7 @@ def test_file_mesh_body(comm, mpi_tmp):
     run.destroy()
     assert summary["status"] == "ok"
     assert summary["mesh"]["cell_type"] == "tet" and summary["mesh"]["cells"] == 6 * 8
+    assert summary["mesh"]["stiffness_assembly"] == "element blocks"
     reactions = summary["steps"][-1]["reactions"]
     base, lid = reactions["boundary[0] cube.base"], reactions["boundary[1] cube.lid"]
     assert lid[:2] == [0.0, 0.0] and lid[2] < 0.0                    # the lid holds uz only, pushing down
