@@ -125,25 +125,9 @@ def lattice_stiffness_matrix(mesh, lattices):
     one broadcast; the other rows are gathered block by block."""
     comm = mesh.comm
     v0, v1 = mesh.vertex_range
-    own = np.flatnonzero(mesh.owned)
-    own = own[np.argsort(mesh.gvert[own])]                   # row r is global vertex v0 + r
-    orig = mesh.vert_orig[own].astype(np.int64)
-    ends = np.array([b.offset for b in lattices] + [lattices[-1].offset + lattices[-1].n_vertices])
-    body = np.searchsorted(ends, orig, side="right") - 1
-    n, nt = len(own), 27 * len(lattices)
-    T, P = np.empty((nt, 3, 27, 3)), np.empty((nt, 27), bool)
-    tid, step = np.empty(n, np.int64), np.empty((n, 27), np.int64)
-    for b, box in enumerate(lattices):
-        T[27 * b:27 * b + 27], P[27 * b:27 * b + 27] = lattice.templates(box.Ke)
-        mine = body == b
-        tid[mine] = 27 * b + lattice.vertex_classes(box, orig[mine] - box.offset)
-        step[mine] = lattice.OFFSETS @ box.stride
+    T, P, tid, gcol = _box_rows(mesh, lattices)
+    n = len(tid)
     valid = P[tid]
-    ao = PETSc.AO().createBasic(mesh.vert_orig[mesh.owned].astype(PETSc.IntType),
-                                mesh.gvert[mesh.owned].astype(PETSc.IntType), comm=comm)
-    gcol = np.asarray(ao.app2petsc(np.where(valid, orig[:, None] + step, 0).ravel().astype(PETSc.IntType)),
-                      np.int64).reshape(n, 27)
-    ao.destroy()
     # one sort per row orders the blocks as PETSc's split CSR wants them: diagonal part, off-diagonal
     # part, absent ones last, each by column; the offset index rides in the low bits
     part = np.where(~valid, 2, np.where((gcol >= v0) & (gcol < v1), 0, 1))
@@ -180,6 +164,31 @@ def lattice_stiffness_matrix(mesh, lattices):
     A.setBlockSizes(3, 3)
     A.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, True)
     return A
+
+
+def _box_rows(mesh, lattices):
+    """Templates T (27 per box, 3, 27, 3) and P of lattice.templates, and per owned row (ascending global
+    vertex) its template id and the global vertex number of each of its 27 neighbour offsets (any
+    valid number where P says there is none)."""
+    own = np.flatnonzero(mesh.owned)
+    own = own[np.argsort(mesh.gvert[own])]                   # row r is global vertex v0 + r
+    orig = mesh.vert_orig[own].astype(np.int64)
+    ends = np.array([b.offset for b in lattices] + [lattices[-1].offset + lattices[-1].n_vertices])
+    body = np.searchsorted(ends, orig, side="right") - 1
+    nt = 27 * len(lattices)
+    T, P = np.empty((nt, 3, 27, 3)), np.empty((nt, 27), bool)
+    tid, step = np.empty(len(own), np.int64), np.empty((len(own), 27), np.int64)
+    for b, box in enumerate(lattices):
+        T[27 * b:27 * b + 27], P[27 * b:27 * b + 27] = lattice.templates(box.Ke)
+        mine = body == b
+        tid[mine] = 27 * b + lattice.vertex_classes(box, orig[mine] - box.offset)
+        step[mine] = lattice.OFFSETS @ box.stride
+    ao = PETSc.AO().createBasic(mesh.vert_orig[mesh.owned].astype(PETSc.IntType),
+                                mesh.gvert[mesh.owned].astype(PETSc.IntType), comm=mesh.comm)
+    nbr = np.where(P[tid], orig[:, None] + step, 0).ravel().astype(PETSc.IntType)
+    gcol = np.asarray(ao.app2petsc(nbr), np.int64).reshape(len(own), 27)
+    ao.destroy()
+    return T, P, tid, gcol
 
 
 def _row_sums(mesh, pattern, entries, groups, lmbda, mu):
