@@ -16,6 +16,7 @@ from petsc4py import PETSc
 from . import fem
 from .errors import MeshError, QscError, SceneError
 from .meshgen import box_mesh, read_mesh_file
+from .options import option_value
 from .partition import coordinate_bisection
 
 MAX_SURFACES = 62          # face membership travels as one int64 bitmask per cell face
@@ -235,7 +236,8 @@ def distribute_mesh(scene, comm):
 
     partitioner = dm.getPartitioner()
     partitioner.setOptionsPrefix("qsc_")      # -qsc_petscpartitioner_type simple|ptscotch|parmetis|...
-    if comm.size > 1 and not PETSc.Options().hasName("qsc_petscpartitioner_type"):
+    chosen = option_value("petscpartitioner_type")
+    if comm.size > 1 and chosen is None:
         # the default: coordinate bisection of the cells, all of which start on rank 0
         if comm.rank == 0:
             part = coordinate_bisection(gm.points[gm.cells].mean(axis=1), comm.size)
@@ -250,7 +252,6 @@ def distribute_mesh(scene, comm):
     except PETSc.Error as exc:
         if exc.ierr not in (56, 86):          # not supported / unknown type: the same on every rank
             raise
-        chosen = PETSc.Options().getString("qsc_petscpartitioner_type", "?")
         raise SceneError(f"-qsc_petscpartitioner_type: {chosen!r} is not available in this PETSc "
                          f"(try ptscotch or simple)") from None
     if sf is not None:

@@ -65,6 +65,13 @@ def remove_options(names):
         opts.delValue(name)
 
 
+def option_value(key, default=None):
+    """The value of option qsc_<key> in the database (command line, scene, code), or default when it is unset."""
+    from petsc4py import PETSc
+    opts = PETSc.Options()
+    return opts.getString(PREFIX + key) if opts.hasName(PREFIX + key) else default
+
+
 def options_in_effect():
     """Every option in the database, as {name: value}."""
     from petsc4py import PETSc

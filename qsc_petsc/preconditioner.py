@@ -22,7 +22,7 @@ options (`-qsc_pc_*`); the band is one submatrix across all ranks, factored once
 import numpy as np
 from petsc4py import PETSc
 
-from .options import insert_options, remove_options, set_from_options
+from .options import insert_options, option_value, remove_options, set_from_options
 
 AMG_TYPES = ("hypre", "gamg")        # the band's partner: the first is the default
 # BoomerAMG: cheaper V-cycles than hypre's defaults (about half the operator complexity, measured) at the
@@ -118,15 +118,9 @@ class BandSolve:
                 obj.destroy()
 
 
-def effective_option(name, default=None):
-    """The value of option qsc_<name> in the database, or default."""
-    opts = PETSc.Options()
-    return opts.getString("qsc_" + name) if opts.hasName("qsc_" + name) else default
-
-
 def amg_type():
     """The band's partner: the preconditioner type the options name, else BoomerAMG."""
-    return effective_option("pc_type", AMG_TYPES[0])
+    return option_value("pc_type", AMG_TYPES[0])
 
 
 def wants_band(mode, has_pairs):
@@ -148,7 +142,7 @@ def install_band_pc(ksp, K, couplings, layers, comm):
     band = band_dofs(K, couplings, layers)
     if comm.allreduce(len(band)) == 0:
         return 0                        # no row within reach: nothing stiff to take out, plain options
-    krylov = effective_option("ksp_type")
+    krylov = option_value("ksp_type")
     added = insert_options(HYPRE_DEFAULTS) if amg_type() == "hypre" else {}   # read once below, then removed
     pc = PETSc.PC().create(comm=comm)
     pc.setOptionsPrefix("qsc_")

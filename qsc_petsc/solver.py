@@ -145,7 +145,7 @@ class System:
         self.snes.setConvergenceTest(self._converged)
         # a named BoomerAMG gets the tuned defaults too (two cubes merged, 212k dofs, CG: 11.3 s against 33 s
         # with hypre's own and 17-22 s with GAMG, docs/performance.md)
-        named_hypre = preconditioner.effective_option("pc_type") == "hypre"
+        named_hypre = options.option_value("pc_type") == "hypre"
         added = options.insert_options(preconditioner.HYPRE_DEFAULTS) if named_hypre else {}
         try:
             options.set_from_options(self.snes, "solver (-qsc_snes_*, -qsc_ksp_*, -qsc_pc_*)")
