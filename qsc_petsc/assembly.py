@@ -140,9 +140,10 @@ def lattice_stiffness_matrix(mesh, lattices):
     vals_d, cols_d = np.empty(9 * rowptr_d[-1]), np.empty(9 * rowptr_d[-1], PETSc.IntType)
     runs = sparsity.equal_runs(tid, natural)
     trip = np.arange(3, dtype=PETSc.IntType)
+    present = [T[t][:, P[t]].ravel() for t in range(len(T))]      # a natural row's values: its template's blocks
     for a, b in runs:
         nb, p0, p1 = n_diag[a], 9 * rowptr_d[a], 9 * rowptr_d[b]
-        vals_d[p0:p1].reshape(b - a, -1)[:] = T[tid[a]][:, P[tid[a]]].ravel()
+        vals_d[p0:p1].reshape(b - a, -1)[:] = present[tid[a]]
         cols_d[p0:p1].reshape(b - a, 3, nb, 3)[:] = (3 * (gcol[a:b, :nb] - v0))[:, None, :, None] + trip
     odd = np.flatnonzero(~sparsity.covered(runs, n))
     sel = (part[odd] == 0)[:, None, :]
@@ -469,8 +470,8 @@ def rigid_body_modes(mesh, template, held=()):
     that fought them (GAMG: 98 Krylov iterations against 49 on two cubes between sticking dies, 70k dofs)."""
     vecs = []
     owned_v = np.flatnonzero(mesh.owned)
-    rows = (3 * mesh.gvert[owned_v] - template.getOwnershipRange()[0]).astype(np.int64)
     r0 = template.getOwnershipRange()[0]
+    rows = (3 * mesh.gvert[owned_v] - r0).astype(np.int64)
     held_rows = []
     for surface, normal in held:
         v = mesh.surface_vertices(surface)

@@ -289,5 +289,4 @@ def distribute_mesh(scene, comm):
         cell_orig=leaf[c0:c1, nn + nf + 1].copy(), face_mask=leaf[c0:c1, nn:nn + nf].copy(),
         vert_orig=vert_orig, gvert=gvert, owned=owned, owner=owner,
         n_vertices=n_vertices, n_cells=n_cells, vertex_range=(vstart, vstart + n_owned),
-        partitioner="none" if comm.size == 1 else
-        "coordinate bisection" if partitioner.getType() == PETSc.Partitioner.Type.SHELL else partitioner.getType())
+        partitioner=(chosen or "coordinate bisection") if comm.size > 1 else "none")
