@@ -7,7 +7,7 @@ import pytest
 from conftest import CONFIGS, run_scene
 from petsc4py import PETSc
 
-from qsc_petsc.solver import KRYLOV_MARGIN
+from qsc_petsc.solver import KRYLOV_MARGIN, START_REACH, START_TOUCHING, System
 
 SMALL = ["bodies.0.mesh.cells=[3,3,3]", "bodies.1.mesh.cells=[4,4,4]"]
 
@@ -74,3 +74,32 @@ def test_no_solve_ends_in_the_closed_start(tmp_path):
     assert summary["status"] == "ok"
     assert any(s["augmented_iterations"] > 0 for step in summary["steps"] for s in step["solves"])
     assert not any(term.start for term in run.system.terms)
+
+
+def _solves(summary):
+    return [s for step in summary["steps"] for s in step["solves"]]
+
+
+def test_increment_starts_from_the_touching_rows(tmp_path, monkeypatch):
+    """A curved contact (hertz_coarse, two increments) starts each increment with the rows that touch or
+    penetrate closed, not every row within reach: the same answer in fewer Newton iterations (measured
+    9 + 8 against 6 + 5 here, 36 + 24 against 20 + 14 on hertz_fine with two_pass)."""
+    run, summary = run_scene(CONFIGS / "hertz_coarse.toml", tmp_path / "touching")
+    assert all(s["closed_start"] == START_TOUCHING for s in _solves(summary))
+    u = run.u.getArray().copy()
+    monkeypatch.setattr(System, "_start_mode", lambda self, u: START_REACH)
+    reach, reach_summary = run_scene(CONFIGS / "hertz_coarse.toml", tmp_path / "reach")
+    assert all(s["closed_start"] == START_REACH for s in _solves(reach_summary))
+    ref = reach.u.getArray()
+    assert np.abs(u - ref).max() <= 1e-8 * np.abs(ref).max()
+    newton = [sum(s["snes_iterations"] for s in _solves(x)) for x in (summary, reach_summary)]
+    assert newton[0] < newton[1]
+
+
+def test_body_held_only_across_a_gap_starts_within_reach(tmp_path):
+    """The patch test's upper block 0.01 m above the lower, held only by contact: no row touches, so the
+    touching start would leave it free (a singular first Newton step); it starts with every row within reach
+    closed (test_extremes.test_gap_closed_by_the_load checks that its answer is the touching one)."""
+    _, summary = run_scene(CONFIGS / "patch_test.toml", tmp_path / "gap", ["bodies.1.mesh.origin=[0,0,0.51]"])
+    assert summary["status"] == "ok"
+    assert _solves(summary)[0]["closed_start"] == START_REACH
