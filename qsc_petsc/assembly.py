@@ -353,9 +353,13 @@ def internal_force(mesh, u_local, lmbda, mu):
             sel = np.flatnonzero(group == g)
             fe[sel] = ue[sel] @ Ke.T
     else:
+        # chunk by chunk; stiffness() groups each chunk's translates again only where the grouping above found
+        # them worth sharing (an unstructured mesh has next to none)
+        share = len(first) <= m // 2
         for s in range(0, m, CHUNK):
             c = slice(s, s + CHUNK)
-            fe[c] = np.einsum("mij,mj->mi", elasticity.stiffness(mesh.cell_type, xe[c], lmbda[c], mu[c]), ue[c])
+            Kc = elasticity.stiffness(mesh.cell_type, xe[c], lmbda[c], mu[c], share_translates=share)
+            fe[c] = np.einsum("mij,mj->mi", Kc, ue[c])
     ldofs = 3 * mesh.cells[:, :, None] + np.arange(3)
     return np.bincount(ldofs.ravel(), fe.ravel(), minlength=3 * len(mesh.coords))
 

@@ -12,11 +12,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import elasticity
-from .meshgen import _CUBE, rotation_matrix
+from .meshgen import HEX_CORNERS, rotation_matrix
 
 # the 27 neighbour offsets d, x fastest: index (dx + 1) + 3 (dy + 1) + 9 (dz + 1)
 OFFSETS = np.array([(x, y, z) for z in (-1, 0, 1) for y in (-1, 0, 1) for x in (-1, 0, 1)])
-_NODE = {tuple(p): a for a, p in enumerate(_CUBE)}        # hex node (VTK order) at a corner offset
+_NODE = {tuple(p): a for a, p in enumerate(HEX_CORNERS)}        # hex node (VTK order) at a corner offset
 
 
 @dataclass
@@ -47,7 +47,7 @@ def box_lattices(scene):
             return None
         n = np.asarray(spec.cells, int)
         # cell (0, 0, 0) as box_mesh makes it: every cell of the box is its translate
-        xe = np.asarray(spec.origin, float) + _CUBE * (np.asarray(spec.size, float) / n)
+        xe = np.asarray(spec.origin, float) + HEX_CORNERS * (np.asarray(spec.size, float) / n)
         if np.any(np.asarray(spec.rotation, float) != 0.0):
             xe = xe @ rotation_matrix(spec.rotation).T
         lmbda, mu = elasticity.lame(body.material.youngs_modulus, body.material.poissons_ratio)

@@ -16,7 +16,7 @@ MESHIO_TYPES = {"tetra": "tet", "hexahedron": "hex"}
 FACET_TYPES = {"tet": "triangle", "hex": "quad"}
 
 # corners of the unit cube in VTK hex order
-_CUBE = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]])
+HEX_CORNERS = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]])
 
 
 def _kuhn_tets():
@@ -26,7 +26,7 @@ def _kuhn_tets():
     permutation; every hex face is then cut along its diagonal through the face's lowest
     corner, the same in neighbouring hexes, so the split is conforming.
     """
-    corner = {tuple(c): i for i, c in enumerate(_CUBE)}
+    corner = {tuple(c): i for i, c in enumerate(HEX_CORNERS)}
     tets = []
     for a, b, _ in permutations(range(3)):
         v1 = np.eye(3, dtype=int)[a]
@@ -45,7 +45,7 @@ def _kuhn_faces_on(side):
     """(tet in hex, local tet face) pairs (2, 2) that lie on box side 0..5 (xmin, xmax, ...)."""
     axis, value = divmod(side, 2)
     return np.array([(t, f) for t in range(6) for f in range(4)
-                     if (_CUBE[KUHN_TETS[t][fem.TET_FACES[f]], axis] == value).all()])
+                     if (HEX_CORNERS[KUHN_TETS[t][fem.TET_FACES[f]], axis] == value).all()])
 
 
 @dataclass
@@ -89,7 +89,7 @@ def box_mesh(origin, size, cells, element="hex", rotation=(0.0, 0.0, 0.0)):
         points = points @ rotation_matrix(rotation).T
     stride = np.array([1, nx + 1, (nx + 1) * (ny + 1)])
     base = (np.arange(nx) + stride[1] * np.arange(ny)[:, None] + stride[2] * np.arange(nz)[:, None, None]).ravel()
-    hexes = base[:, None] + _CUBE @ stride                               # cell id i + nx (j + ny k)
+    hexes = base[:, None] + HEX_CORNERS @ stride                               # cell id i + nx (j + ny k)
     ids = np.arange(nx * ny * nz).reshape(nz, ny, nx)
     on_side = [ids[:, :, 0], ids[:, :, -1], ids[:, 0, :], ids[:, -1, :], ids[0], ids[-1]]
     if element == "hex":

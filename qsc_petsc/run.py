@@ -196,15 +196,17 @@ class Run:
         n_steps = scene.load.steps
         u = system.u.copy()
         update = (lambda u, t: self.contact.terms(u, t)) if self.contact else (lambda u, t: [])
+        before = None         # the converged state before u, (t, Vec), while the predictor extrapolates
         try:
             for step in range(1, n_steps + 1):
                 t_prev, t = (step - 1) / n_steps, step / n_steps
                 with self.phases("solve"):
                     aug = scene.contact[0] if scene.contact else None
-                    u, stats = solve_load_step(
+                    u, stats, before = solve_load_step(
                         system, step, t_prev, t, u, update, scene.solver.max_cutbacks,
                         augmented_tol=aug.augmented_tolerance if aug else 1e-6,
-                        augmented_max=aug.augmented_max_iterations if aug else 25, log=self.log)
+                        augmented_max=aug.augmented_max_iterations if aug else 25, log=self.log,
+                        before=before, predict=scene.solver.predictor == "extrapolate")
                 with self.phases("output"):
                     point, cell, ul = self.fields(u)
                     record = self._step_record(step, t, stats, u, ul)

@@ -501,6 +501,11 @@ SCHEMA = Table({
         "max_active_set_iterations": Int("Most active-set (semi-smooth Newton) iterations per load step.", ge=1,
                                          default=60),
         "active_set_tolerance": Float("Relative closed-set tolerance on the constraint rows.", gt=0, default=1e-12),
+        "predictor": Choice(("extrapolate", "previous"),
+                            "Where an increment's Newton iterations start: the linear extrapolation of the last "
+                            "two converged states along the load (\"extrapolate\"; the previous state on the "
+                            "first increment and after a failed try), or the previous converged state.",
+                            default="extrapolate"),
         "contact_preconditioner": Choice(("auto", "band", "none"),
                                          "Linear solves with contact pairs: \"auto\" composes an algebraic "
                                          "multigrid (BoomerAMG unless pc_type names gamg) with an exact solve on the "

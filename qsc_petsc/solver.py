@@ -6,6 +6,8 @@ Jacobian (formulation.md section 4). Between two contact searches G is frozen, s
 converges when the active set stops changing and the residual (or the step) is small.
 """
 
+import hashlib
+
 import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
@@ -25,6 +27,7 @@ MUMPS_WORKSPACE_ERRORS = (-8, -9, -14, -15, -17, -20)
 MUMPS_MAX_RELAXATION = 1000    # percent
 KSP_MAX_IT = 2000              # Krylov iterations per linear solve unless -qsc_ksp_max_it says otherwise
 START_TOUCHING, START_REACH = "touching", "reach"   # ConstraintTerm.start: an increment's first closed set
+DAMPING_HALVINGS = 8           # smallest damped Newton step 1/2^7 (System._damp)
 KRYLOV_MARGIN = 0.1            # the Krylov residual's stop below the Newton target (System._match_krylov_to_newton)
 
 
@@ -117,6 +120,11 @@ class System:
         # (restraint.Restraint); a solve never converges to an active set that leaves a body free
         self.free_motions = None
         self.free_now = self.free_seen = ""
+        # active-set cycling guard (_converged, _damp): the active sets this solve has met, {signature: last
+        # iteration}, and the iteration from which Newton steps are damped (None: full steps)
+        self.sets_seen = {}
+        self.damped_from = None
+        self.damped_steps = 0
         self.own_options = set()       # options this system set (removed by destroy)
         # the rows' stiffnesses d the Jacobian holds: between two searches J = K + sum G^T diag(d) G depends
         # on u through d only, so an unchanged d keeps J, and the preconditioner built on it, as they are
@@ -146,6 +154,7 @@ class System:
         self.snes.setFunction(self._residual, self.r)
         self.snes.setJacobian(self._jacobian, self.J, self.J)
         self.snes.setConvergenceTest(self._converged)
+        self.snes.setLineSearchPreCheck(self._damp)
         # a named BoomerAMG gets the tuned defaults too (two cubes merged, 212k dofs, CG: 11.3 s against 33 s
         # with hypre's own and 17-22 s with GAMG, docs/performance.md)
         named_hypre = options.option_value("pc_type") == "hypre"
@@ -255,6 +264,7 @@ class System:
         first = self.prev_active is None
         self.prev_active = active.copy()
         rtol, atol, stol, max_it = snes.getTolerances()
+        self._watch_cycles(it, active)
         if it == 0:
             return PETSc.SNES.ConvergedReason.CONVERGED_FNORM_ABS if fnorm <= atol else 0
         if not np.isfinite(fnorm):
@@ -276,12 +286,52 @@ class System:
             return PETSc.SNES.ConvergedReason.DIVERGED_MAX_IT
         return 0
 
+    def _watch_cycles(self, it, active):
+        """Damp the Newton steps from the iteration at which the active set returns to one it had two or more
+        iterations before (collective). Full semi-smooth steps can cycle among a few sets whose rows sit at
+        the contact edge: hertz_xfine with two_pass repeated the same 6 residual norms from its 27th
+        iteration until the cap (50, then 120) and the increment had to be halved."""
+        if it == 0:
+            self.sets_seen, self.damped_from = {}, None
+        digest = hashlib.blake2b(np.packbits(active).tobytes(), digest_size=8).digest()
+        signature = tuple(self.comm.allgather(digest))
+        if self.damped_from is None and self.sets_seen.get(signature, it) < it - 1:
+            self.damped_from = it
+        self.sets_seen[signature] = it
+
+    def _damp(self, x, y):
+        """Line-search pre-check (the step is x - y): once cycling was seen (_watch_cycles), halve y until the
+        residual norm falls below (1 - 1e-4 lambda) of the current one, at most DAMPING_HALVINGS times
+        (a backtracking line search on |F|; the semi-smooth Newton direction descends |F|^2). Returns
+        whether y changed."""
+        if self.damped_from is None:
+            return False
+        f0 = self.snes.getFunctionNorm()
+        trial, r = x.duplicate(), x.duplicate()
+        lam = 1.0
+        try:
+            for _ in range(DAMPING_HALVINGS):
+                trial.waxpy(-lam, y, x)
+                self._residual(self.snes, trial, r)
+                if r.norm() <= (1.0 - 1e-4 * lam) * f0:
+                    break
+                lam *= 0.5
+        finally:
+            trial.destroy()
+            r.destroy()
+        if lam == 1.0:
+            return False
+        y.scale(lam)
+        self.damped_steps += 1
+        return True
+
     def solve_at(self, t, u0):
         """One SNES solve at load factor t from initial guess u0; returns (ok, stats)."""
         self.t = t
         self.prev_active = None
         self.free_now = self.free_seen = ""
         rebuilds = self.jacobian_rebuilds
+        self.damped_steps = 0
         start = None
         while True:
             u = u0.copy()
@@ -316,6 +366,8 @@ class System:
             "ksp_reason": KSP_REASONS.get(ksp_reason, str(ksp_reason)),
             "active_rows": self.active_count(),
             "closed_start": start,          # the rows the increment started closed (None without rows)
+            "damped_from": self.damped_from,   # the Newton iteration where active-set cycling was met, or None
+            "damped_steps": self.damped_steps,
             "jacobian_assemblies": self.jacobian_rebuilds - rebuilds,   # with rows: one per new active set
         }
         if reason <= 0 and self.free_seen:
@@ -369,15 +421,32 @@ class System:
             self.J.destroy()
 
 
-def solve_load_step(system, step, t_prev, t_target, u, update_terms, max_cutbacks,
-                    augmented_tol=1e-6, augmented_max=25, log=None):
-    """Advance from t_prev to t_target, halving the increment on failure; returns (u, stats).
+def extrapolate(before, t_b, u_b, t):
+    """A new Vec: the load path through the converged states before = (t_a, u_a) and (t_b, u_b), extended
+    linearly to t; u_b itself when there is no earlier state."""
+    start = u_b.copy()
+    if before is not None and t_b > before[0]:
+        w = (t - t_b) / (t_b - before[0])
+        start.axpy(w, u_b)
+        start.axpy(-w, before[1])
+    return start
 
+
+def solve_load_step(system, step, t_prev, t_target, u, update_terms, max_cutbacks,
+                    augmented_tol=1e-6, augmented_max=25, log=None, before=None, predict=True):
+    """Advance from t_prev to t_target, halving the increment on failure; returns (u, stats, before).
+
+    predict: each try starts from the linear extrapolation of the last two converged states along the load
+    (exact for a linear response: the increment needs one Newton step), except the first try of a run and a
+    try after a failed one, which start from the converged state; False: always from the converged state.
+    before: None, or (t_a, u_a), the converged state before (t_prev, u); the returned before is the state
+    before the returned u (None unless predict), for the next call.
     A body that the boundary conditions and every contact row within reach leave free is a scene
     error (System.free_motions); a failed solve names what its iterates left free."""
     dt = t_target - t_prev
     t = t_prev
     cutbacks, records = 0, []
+    failed = False
     while t < t_target - 1e-14:
         t_try = min(t + dt, t_target)
         system.set_terms(update_terms(u, t_try))
@@ -386,7 +455,10 @@ def solve_load_step(system, step, t_prev, t_target, u, update_terms, max_cutback
             raise SceneError(f"load step {step}: free rigid-body motion of {free}: no displacement or symmetry "
                              f"boundary holds it and no contact row or die within reach does (frictionless "
                              f"contact holds the normal direction only); add a boundary condition")
-        ok, u_new, stats = system.solve_at(t_try, u)
+        start = extrapolate(None if failed else before, t, u, t_try)
+        ok, u_new, stats = system.solve_at(t_try, start)
+        stats["predictor"] = "extrapolated" if before is not None and not failed else "previous"
+        start.destroy()
         augmented = [term for term in system.terms if term.augmented]
         outer = 0
         while ok and augmented:
@@ -406,10 +478,15 @@ def solve_load_step(system, step, t_prev, t_target, u, update_terms, max_cutback
         stats.update(load_factor=t_try, augmented_iterations=outer)
         records.append(stats)
         if ok:
-            u.destroy()
-            u, t = u_new, t_try
+            if before is not None:
+                before[1].destroy()
+            before = (t, u) if predict else None
+            if not predict:
+                u.destroy()
+            u, t, failed = u_new, t_try, False
             continue
         u_new.destroy()
+        failed = True
         cutbacks += 1
         if log:
             log(f"step {step}: solve at load factor {t_try:.6g} failed "
@@ -423,4 +500,4 @@ def solve_load_step(system, step, t_prev, t_target, u, update_terms, max_cutback
                 f"cutbacks: SNES {stats['snes_reason']} after {stats['snes_iterations']} iterations, "
                 f"KSP {stats['ksp_reason']}{why}")
         dt *= 0.5
-    return u, {"cutbacks": cutbacks, "solves": records}
+    return u, {"cutbacks": cutbacks, "solves": records}, before

@@ -3,9 +3,9 @@
 import numpy as np
 
 from qsc_petsc import elasticity, lattice
-from qsc_petsc.meshgen import _CUBE
+from qsc_petsc.meshgen import HEX_CORNERS
 
-KE = elasticity.stiffness("hex", (_CUBE * [0.5, 0.3, 0.2])[None], *elasticity.lame(1000.0, 0.3))[0]
+KE = elasticity.stiffness("hex", (HEX_CORNERS * [0.5, 0.3, 0.2])[None], *elasticity.lame(1000.0, 0.3))[0]
 
 
 def test_every_template_row_annihilates_translations():

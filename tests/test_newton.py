@@ -2,9 +2,12 @@
 Krylov solve stops where the Newton test needs it (solver.System). Small two-cube scene between sticking
 dies, serial, the iterative defaults."""
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 from conftest import CONFIGS, run_scene
+from mpi4py import MPI
 from petsc4py import PETSc
 
 from qsc_petsc.solver import KRYLOV_MARGIN, START_REACH, START_TOUCHING, System
@@ -22,8 +25,10 @@ def scene_without_petsc(tmp_path, petsc=""):
 
 def test_unchanged_active_set_keeps_the_jacobian(tmp_path):
     """Every increment's second Newton step sees the active set of the first: it shall reuse the Jacobian
-    (one assembly per increment) and still give the direct solver's answer."""
-    run, summary = run_scene(scene_without_petsc(tmp_path), tmp_path / "iterative", SMALL)
+    (one assembly per increment) and still give the direct solver's answer. Each increment starts from the
+    previous state (the extrapolating predictor would make the second increment's first step exact)."""
+    run, summary = run_scene(scene_without_petsc(tmp_path), tmp_path / "iterative",
+                             SMALL + ['solver.predictor="previous"'])
     solves = [s for step in summary["steps"] for s in step["solves"]]
     assert all(s["snes_iterations"] == 2 and s["jacobian_assemblies"] == 1 for s in solves)
     u = run.u.getArray().copy()
@@ -103,3 +108,57 @@ def test_body_held_only_across_a_gap_starts_within_reach(tmp_path):
     _, summary = run_scene(CONFIGS / "patch_test.toml", tmp_path / "gap", ["bodies.1.mesh.origin=[0,0,0.51]"])
     assert summary["status"] == "ok"
     assert _solves(summary)[0]["closed_start"] == START_REACH
+
+
+def test_extrapolated_increment_of_a_linear_response_takes_one_newton_step(tmp_path):
+    """The two cubes between sticking dies respond linearly once the active set holds: from the extrapolation
+    of the converged states at t = 0 and 1/3, the increments to 2/3 and 1 start within the Newton target of
+    their answers and take one Newton step each, fewer Krylov iterations than from the previous state,
+    and the same answer."""
+    sets = SMALL + ["load.steps=3"]
+    run, summary = run_scene(scene_without_petsc(tmp_path), tmp_path / "extrapolate", sets)
+    solves = _solves(summary)
+    assert [s["predictor"] for s in solves] == ["previous", "extrapolated", "extrapolated"]
+    assert [s["snes_iterations"] for s in solves[1:]] == [1, 1]
+    prev, prev_summary = run_scene(scene_without_petsc(tmp_path), tmp_path / "previous",
+                                   sets + ['solver.predictor="previous"'])
+    assert all(s["predictor"] == "previous" for s in _solves(prev_summary))
+    krylov = [sum(s["ksp_iterations"] for s in _solves(x)[1:]) for x in (summary, prev_summary)]
+    assert krylov[0] < krylov[1]
+    u, ref = run.u.getArray(), prev.u.getArray()
+    assert np.abs(u - ref).max() <= 1e-8 * np.abs(ref).max()
+
+
+def test_cycle_watch_damps_from_a_returning_active_set():
+    """An active set met again two or more iterations later is a cycle: steps are damped from there on. The
+    same set at consecutive iterations is an iteration converging, not a cycle."""
+    A, B, C = (np.array(v, bool) for v in ([1, 0, 1], [1, 1, 1], [0, 0, 1]))
+
+    def watch(sets):
+        ns = SimpleNamespace(comm=MPI.COMM_SELF, sets_seen={}, damped_from=None)
+        for it, active in enumerate(sets):
+            System._watch_cycles(ns, it, active)
+        return ns.damped_from
+
+    assert watch([A, A, A]) is None
+    assert watch([A, B, C, B]) == 3
+    assert watch([A, B, A]) == 2
+    assert watch([A, B, C, C, B]) == 4
+    assert watch([A, B, A, B, A]) == 2       # the first return damps; later ones do not move it
+
+
+def test_damped_steps_reach_the_same_answer(tmp_path, monkeypatch):
+    """With damping on from the first iteration (as after a cycle), every step goes through the backtracking
+    pre-check (System._damp): hertz_coarse converges to the undamped answer."""
+    run, _ = run_scene(CONFIGS / "hertz_coarse.toml", tmp_path / "full")
+    u = run.u.getArray().copy()
+
+    def always(self, it, active):
+        self.damped_from = 0
+
+    monkeypatch.setattr(System, "_watch_cycles", always)
+    damped, summary = run_scene(CONFIGS / "hertz_coarse.toml", tmp_path / "damped")
+    assert summary["status"] == "ok"
+    assert all(s["damped_from"] == 0 for s in _solves(summary))
+    ref = damped.u.getArray()
+    assert np.abs(u - ref).max() <= 1e-8 * np.abs(ref).max()
