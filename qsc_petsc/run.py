@@ -1,7 +1,9 @@
 """The run: validated scene -> distributed mesh -> operators -> load steps -> output folder."""
 
+import atexit
 import resource
 import time
+import weakref
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -15,6 +17,21 @@ from .mesh import distribute_mesh, on_root
 from .output import ResultWriter, write_json
 from .restraint import Restraint, describe
 from .solver import System, solve_load_step
+
+# Runs built and not yet destroyed, as weak references in creation order (the same order on every rank).
+_LIVE_RUNS = []
+
+
+@atexit.register      # registered after petsc4py's import, so it runs before petsc4py finalizes PETSc
+def _destroy_live_runs():
+    """Destroy the runs an in-process caller left alive: at PetscFinalize, PETSc's own cleanup of their
+    solver objects (a composite preconditioner with a Python part) crashed with SEGV after the results
+    were written."""
+    for ref in _LIVE_RUNS:
+        run = ref()
+        if run is not None:
+            run.destroy()
+    _LIVE_RUNS.clear()
 
 
 class Phases:
@@ -79,11 +96,13 @@ class Run:
         self.phases = Phases(comm)
         self.out = prepare_output(scene, out_dir, comm)
         self.from_scene = options.insert_options(scene.petsc)
+        self.destroyed = False
         try:
             self._build(scene, comm)
         except BaseException:
             options.remove_options(self.from_scene)   # a failed set-up leaks no options to the next run
             raise
+        _LIVE_RUNS[:] = [ref for ref in _LIVE_RUNS if ref() is not None] + [weakref.ref(self)]
 
     def _build(self, scene, comm):
         """Mesh, operators, solver, contact model and output writer, in that order."""
@@ -247,6 +266,10 @@ class Run:
         }
 
     def destroy(self):
+        """Release the run's PETSc objects (collective); a second call does nothing."""
+        if self.destroyed:
+            return
+        self.destroyed = True
         options.remove_options(self.from_scene)   # scene options live only while their run does
         self.system.destroy()
         self.restraint.destroy()

@@ -2,6 +2,8 @@
 Krylov solve stops where the Newton test needs it (solver.System). Small two-cube scene between sticking
 dies, serial, the iterative defaults."""
 
+import subprocess
+import sys
 from types import SimpleNamespace
 
 import numpy as np
@@ -162,3 +164,18 @@ def test_damped_steps_reach_the_same_answer(tmp_path, monkeypatch):
     assert all(s["damped_from"] == 0 for s in _solves(summary))
     ref = damped.u.getArray()
     assert np.abs(u - ref).max() <= 1e-8 * np.abs(ref).max()
+
+
+def test_run_left_alive_in_process_exits_cleanly(tmp_path):
+    """A Run used from Python and never destroyed (the contact band's composite preconditioner, with its
+    Python part, alive at exit) is destroyed before PETSc finalizes: the interpreter exits 0, no SEGV."""
+    scene = scene_without_petsc(tmp_path)
+    code = (f"from mpi4py import MPI\n"
+            f"from qsc_petsc.run import Run\nfrom qsc_petsc.scene import load_scene\n"
+            f"run = Run(load_scene({str(scene)!r}, {SMALL!r}), MPI.COMM_WORLD, {str(tmp_path / 'out')!r},"
+            f" log=lambda *a, **k: None)\n"
+            f"assert run.execute()['status'] == 'ok'\n")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300,
+                          check=False)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert "SEGV" not in proc.stderr
