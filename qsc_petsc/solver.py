@@ -289,8 +289,9 @@ class System:
     def _watch_cycles(self, it, active):
         """Damp the Newton steps from the iteration at which the active set returns to one it had two or more
         iterations before (collective). Full semi-smooth steps can cycle among a few sets whose rows sit at
-        the contact edge: hertz_xfine with two_pass repeated the same 6 residual norms from its 27th
-        iteration until the cap (50, then 120) and the increment had to be halved."""
+        the contact edge: hertz_xfine with two_pass, started from the previous state, repeated the same six
+        residual norms from its 31st iteration (the 31st set came back at the 37th) and did not settle
+        within 50 or 120; damped from the 37th it converged at the 41st."""
         if it == 0:
             self.sets_seen, self.damped_from = {}, None
         digest = hashlib.blake2b(np.packbits(active).tobytes(), digest_size=8).digest()
@@ -382,8 +383,9 @@ class System:
 
         Touching first: a start that glued every row within reach made a curved contact peel the rows outside
         its zone off over tens of Newton iterations, in every increment (Hertz, fine level, two_pass: 36 + 24
-        iterations with 899 rows glued for 75 in contact; 20 + 14 from the touching rows, same answer). Within reach when the touching rows hold too little: a body
-        held only by contact across a gap would be singular in the first Newton step."""
+        iterations with 899 rows glued for 75 in contact; 20 + 14 from the touching rows, same answer).
+        Within reach when the touching rows hold too little: a body held only by contact across a gap would
+        be singular in the first Newton step."""
         if not self.terms:
             return None
         if self.free_motions is None:        # no restraint check to ask (a bare System): the start that is safe
