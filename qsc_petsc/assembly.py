@@ -481,8 +481,7 @@ def rigid_body_modes(mesh, template, held=()):
         v = mesh.surface_vertices(surface)
         held_rows.append(((3 * mesh.gvert[v[mesh.owned[v]]] - r0).astype(np.int64), normal))
     for b in range(len(mesh.body_names)):
-        in_body = np.zeros(len(mesh.coords), dtype=bool)
-        in_body[mesh.cells[mesh.cell_body == b]] = True          # a mask needs no sorted vertex list
+        in_body = mesh.body_mask(b)
         sel = in_body[owned_v]
         x = mesh.coords[owned_v[sel]]
         r = rows[sel]

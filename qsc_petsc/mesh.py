@@ -96,7 +96,13 @@ class LocalMesh:
 
     def body_vertices(self, body):
         """Local vertex indices of a body."""
-        return np.unique(self.cells[self.cell_body == body])
+        return np.flatnonzero(self.body_mask(body))
+
+    def body_mask(self, body):
+        """Whether each local vertex belongs to a body (a mask needs no sorted vertex list)."""
+        mask = np.zeros(len(self.coords), dtype=bool)
+        mask[self.cells[self.cell_body == body]] = True
+        return mask
 
 
 def on_root(comm, fn):

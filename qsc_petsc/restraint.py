@@ -70,7 +70,7 @@ class Restraint:
         owned = np.flatnonzero(mesh.owned)
         body_of = np.full(len(mesh.coords), -1)
         for b in range(nb):
-            body_of[mesh.cells[mesh.cell_body == b]] = b          # a mask: no sorted vertex list needed
+            body_of[mesh.body_mask(b)] = b
         # (owned dofs, 6 nb) columns: each body's six motions, zero elsewhere
         self.R = np.zeros((3 * len(owned), 6 * nb))
         rows = (3 * mesh.gvert[owned] - r0)[:, None] + np.arange(3)

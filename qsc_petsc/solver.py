@@ -131,7 +131,7 @@ class System:
         self.jacobian_d = None
         self.jacobian_rebuilds = 0
         # the Krylov stop follows the Newton test (KSP atol = KRYLOV_MARGIN x SNES target) unless the user set one
-        self.ksp_atol_auto = not PETSc.Options().hasName("qsc_ksp_atol")
+        self.ksp_atol_auto = options.option_value("ksp_atol") is None
         self.mumps_relaxation = None   # MUMPS ICNTL(14) [%] once raised after a workspace failure
 
         self.snes = PETSc.SNES().create(comm=comm)
@@ -457,9 +457,10 @@ def solve_load_step(system, step, t_prev, t_target, u, update_terms, max_cutback
             raise SceneError(f"load step {step}: free rigid-body motion of {free}: no displacement or symmetry "
                              f"boundary holds it and no contact row or die within reach does (frictionless "
                              f"contact holds the normal direction only); add a boundary condition")
-        start = extrapolate(None if failed else before, t, u, t_try)
+        path = None if failed else before          # a try after a failed one starts from the converged state
+        start = extrapolate(path, t, u, t_try)
         ok, u_new, stats = system.solve_at(t_try, start)
-        stats["predictor"] = "extrapolated" if before is not None and not failed else "previous"
+        stats["predictor"] = "previous" if path is None else "extrapolated"
         start.destroy()
         augmented = [term for term in system.terms if term.augmented]
         outer = 0
@@ -480,11 +481,12 @@ def solve_load_step(system, step, t_prev, t_target, u, update_terms, max_cutback
         stats.update(load_factor=t_try, augmented_iterations=outer)
         records.append(stats)
         if ok:
-            if before is not None:
-                before[1].destroy()
-            before = (t, u) if predict else None
             if not predict:
                 u.destroy()
+            else:
+                if before is not None:
+                    before[1].destroy()
+                before = (t, u)
             u, t, failed = u_new, t_try, False
             continue
         u_new.destroy()

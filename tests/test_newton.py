@@ -17,6 +17,11 @@ from qsc_petsc.solver import KRYLOV_MARGIN, START_REACH, START_TOUCHING, System
 SMALL = ["bodies.0.mesh.cells=[3,3,3]", "bodies.1.mesh.cells=[4,4,4]"]
 
 
+def _solves(summary):
+    """Every SNES solve of a run's summary, increment by increment."""
+    return [s for step in summary["steps"] for s in step["solves"]]
+
+
 def scene_without_petsc(tmp_path, petsc=""):
     """configs/two_cubes_dies.toml with its [petsc] table (MUMPS) replaced by `petsc`: the defaults if empty."""
     text = (CONFIGS / "two_cubes_dies.toml").read_text()
@@ -31,7 +36,7 @@ def test_unchanged_active_set_keeps_the_jacobian(tmp_path):
     previous state (the extrapolating predictor would make the second increment's first step exact)."""
     run, summary = run_scene(scene_without_petsc(tmp_path), tmp_path / "iterative",
                              SMALL + ['solver.predictor="previous"'])
-    solves = [s for step in summary["steps"] for s in step["solves"]]
+    solves = _solves(summary)
     assert all(s["snes_iterations"] == 2 and s["jacobian_assemblies"] == 1 for s in solves)
     u = run.u.getArray().copy()
     direct, _ = run_scene(CONFIGS / "two_cubes_dies.toml", tmp_path / "direct", SMALL)
@@ -79,12 +84,8 @@ def test_no_solve_ends_in_the_closed_start(tmp_path):
     run, summary = run_scene(CONFIGS / "patch_test.toml", tmp_path / "out",
                              ['contact.0.enforcement="augmented_lagrangian"'])
     assert summary["status"] == "ok"
-    assert any(s["augmented_iterations"] > 0 for step in summary["steps"] for s in step["solves"])
+    assert any(s["augmented_iterations"] > 0 for s in _solves(summary))
     assert not any(term.start for term in run.system.terms)
-
-
-def _solves(summary):
-    return [s for step in summary["steps"] for s in step["solves"]]
 
 
 def test_increment_starts_from_the_touching_rows(tmp_path, monkeypatch):
