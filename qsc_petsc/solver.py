@@ -29,6 +29,9 @@ KSP_MAX_IT = 2000              # Krylov iterations per linear solve unless -qsc_
 START_TOUCHING, START_REACH = "touching", "reach"   # ConstraintTerm.start: an increment's first closed set
 DAMPING_HALVINGS = 8           # smallest damped Newton step 1/2^7 (System._damp)
 KRYLOV_MARGIN = 0.1            # the Krylov residual's stop below the Newton target (System._match_krylov_to_newton)
+# round-off floor (System._converged): a Newton step taken with the final active set that did not halve the
+# residual, which is within FLOOR_SPAN of the target, ends the solve (the linear solves cannot go lower)
+FLOOR_REDUCTION, FLOOR_SPAN = 0.5, 1e3
 
 
 class ConstraintTerm:
@@ -125,6 +128,10 @@ class System:
         self.sets_seen = {}
         self.damped_from = None
         self.damped_steps = 0
+        # the residual norm of the previous iteration, and the relative residual at which a solve stopped on the
+        # round-off floor (None: it met the target)
+        self.last_fnorm = None
+        self.floor = None
         self.own_options = set()       # options this system set (removed by destroy)
         # the rows' stiffnesses d the Jacobian holds: between two searches J = K + sum G^T diag(d) G depends
         # on u through d only, so an unchanged d keeps J, and the preconditioner built on it, as they are
@@ -265,7 +272,9 @@ class System:
         self.prev_active = active.copy()
         rtol, atol, stol, max_it = snes.getTolerances()
         self._watch_cycles(it, active)
+        last_fnorm, self.last_fnorm = self.last_fnorm, fnorm
         if it == 0:
+            self.floor = None
             return PETSc.SNES.ConvergedReason.CONVERGED_FNORM_ABS if fnorm <= atol else 0
         if not np.isfinite(fnorm):
             return PETSc.SNES.ConvergedReason.DIVERGED_FNORM_NAN
@@ -282,9 +291,23 @@ class System:
                 return PETSc.SNES.ConvergedReason.CONVERGED_FNORM_RELATIVE
             if ynorm <= stol * xnorm:
                 return PETSc.SNES.ConvergedReason.CONVERGED_SNORM_RELATIVE
+            if self._on_floor(it, fnorm, last_fnorm, rtol * self.force_scale):
+                self.floor = fnorm / self.force_scale
+                return PETSc.SNES.ConvergedReason.CONVERGED_SNORM_RELATIVE
         if it >= max_it:
             return PETSc.SNES.ConvergedReason.DIVERGED_MAX_IT
         return 0
+
+    def _on_floor(self, it, fnorm, last_fnorm, target):
+        """Whether the residual sits on the linear solves' round-off floor: the last step was taken with the
+        active set it ended with (an exact linearisation) and a converged Krylov solve aimed below
+        KRYLOV_MARGIN x target, yet the residual fell by less than FLOOR_REDUCTION; and it is within FLOOR_SPAN
+        of the target (a Newton method that stalls far above it, e.g. on a wrong Jacobian, is not
+        converged). A slender cantilever (20 x 1 x 1, 160 x 8 x 8 hexes, CG + GAMG) stopped at 1.7e-8 of its
+        force scale for a target of 1e-10; two more Newton steps of 14 and 13 Krylov iterations left it there."""
+        return (it >= 2 and last_fnorm is not None and fnorm > FLOOR_REDUCTION * last_fnorm
+                and fnorm <= FLOOR_SPAN * target
+                and self.snes.getKSP().getConvergedReason() > 0)
 
     def _watch_cycles(self, it, active):
         """Damp the Newton steps from the iteration at which the active set returns to one it had two or more
@@ -369,6 +392,7 @@ class System:
             "closed_start": start,          # the rows the increment started closed (None without rows)
             "damped_from": self.damped_from,   # the Newton iteration where active-set cycling was met, or None
             "damped_steps": self.damped_steps,
+            "round_off_floor": self.floor,     # the relative residual it stopped at on the floor, or None
             "jacobian_assemblies": self.jacobian_rebuilds - rebuilds,   # with rows: one per new active set
         }
         if reason <= 0 and self.free_seen:

@@ -12,7 +12,7 @@ from conftest import CONFIGS, run_scene
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from qsc_petsc.solver import KRYLOV_MARGIN, START_REACH, START_TOUCHING, System
+from qsc_petsc.solver import FLOOR_SPAN, KRYLOV_MARGIN, START_REACH, START_TOUCHING, System
 
 SMALL = ["bodies.0.mesh.cells=[3,3,3]", "bodies.1.mesh.cells=[4,4,4]"]
 
@@ -148,6 +148,22 @@ def test_cycle_watch_damps_from_a_returning_active_set():
     assert watch([A, B, A]) == 2
     assert watch([A, B, C, C, B]) == 4
     assert watch([A, B, A, B, A]) == 2       # the first return damps; later ones do not move it
+
+
+def test_round_off_floor_rule():
+    """A step taken with the final active set and a converged Krylov solve that does not halve the residual,
+    near the target, is the round-off floor; a residual that halves, one far above the target (a stalled
+    Newton method), a failed Krylov solve or the first step are not."""
+    def floor(it, fnorm, last, target=1e-12, ksp_reason=2):
+        ksp = SimpleNamespace(getConvergedReason=lambda: ksp_reason)
+        ns = SimpleNamespace(snes=SimpleNamespace(getKSP=lambda: ksp))
+        return System._on_floor(ns, it, fnorm, last, target)
+
+    assert floor(2, 6.1e-13 * 16, 9.5e-13 * 16)
+    assert not floor(2, 4e-13 * 16, 9.5e-13 * 16)                 # halved: Newton still gaining
+    assert not floor(2, 2 * FLOOR_SPAN * 1e-12, 2.1 * FLOOR_SPAN * 1e-12)   # stalled far above the target
+    assert not floor(2, 9e-12, 1e-11, ksp_reason=-3)              # the Krylov solve failed
+    assert not floor(1, 9e-12, 1e-11)                             # the first step is measured from F(u0)
 
 
 def test_damped_steps_reach_the_same_answer(tmp_path, monkeypatch):

@@ -96,3 +96,28 @@ def test_symmetry_planes_act_as_rollers(comm, mpi_tmp):
     assert reactions["boundary[2] block.zmin"][2] == pytest.approx(E * STRAIN, rel=1e-8)
     run.destroy()
 
+
+
+def test_slender_cantilever_stops_at_the_round_off_floor(comm, mpi_tmp):
+    """A 20 x 1 x 1 cantilever under pressure, CG + GAMG: its residual cannot reach 1e-10 of the force scale
+    (round-off of the ill-conditioned operator); the Newton loop stops after one confirming step at most
+    (step test or round-off floor, System._on_floor), with the direct solver's displacement."""
+    from qsc_petsc.run import Run
+    from qsc_petsc.scene import load_scene, parse_scene
+    data = load_scene(CONFIGS / "block_compression.toml", ["load.steps=1"]).to_dict()
+    data["bodies"][0]["mesh"].update(size=[20.0, 1.0, 1.0], cells=[160, 8, 8], element="hex")
+    data["boundary"] = [{"surface": "block.xmin", "type": "displacement", "ux": 0.0, "uy": 0.0, "uz": 0.0},
+                        {"surface": "block.zmax", "type": "pressure", "value": 1e-3}]
+    data.pop("petsc", None)
+    iterative = Run(parse_scene(data, CONFIGS, "cantilever"), comm, mpi_tmp / "cg", log=lambda *a: None)
+    summary = iterative.execute()
+    assert summary["status"] == "ok"
+    assert summary["steps"][0]["snes_iterations"] <= 2
+    data["petsc"] = {"ksp_type": "preonly", "pc_type": "lu", "pc_factor_mat_solver_type": "mumps"}
+    direct = Run(parse_scene(data, CONFIGS, "cantilever"), comm, mpi_tmp / "lu", log=lambda *a: None)
+    direct.execute()
+    u, ref = iterative.u.getArray(), direct.u.getArray()
+    scale = comm.allreduce(np.abs(ref).max(), op=MPI.MAX)
+    assert comm.allreduce(np.abs(u - ref).max(), op=MPI.MAX) <= 1e-8 * scale
+    iterative.destroy()
+    direct.destroy()
