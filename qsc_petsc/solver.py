@@ -7,6 +7,7 @@ converges when the active set stops changing and the residual (or the step) is s
 """
 
 import hashlib
+import time
 
 import numpy as np
 from mpi4py import MPI
@@ -32,6 +33,14 @@ KRYLOV_MARGIN = 0.1            # the Krylov residual's stop below the Newton tar
 # round-off floor (System._converged): a Newton step taken with the final active set that did not halve the
 # residual, which is within FLOOR_SPAN of the target, ends the solve (the linear solves cannot go lower)
 FLOOR_REDUCTION, FLOOR_SPAN = 0.5, 1e3
+# a PETSc error inside the solve (System.solve_at): how long the failed rank waits for every other rank to fail
+# too before the error is treated as one rank's (re-raised: the CLI aborts the job rather than hang)
+AGREE_SECONDS = 20.0
+PETSC_ERRORS = {55: "out of memory", 56: "an operation the matrix or solver type does not support",
+                71: "a zero pivot in an LU factorization", 76: "an error in an external library (hypre, MUMPS, ...)",
+                77: "an error in an external library (hypre, MUMPS, ...)",
+                81: "a zero pivot in a Cholesky factorization (the matrix is not positive definite)",
+                82: "a failed inner iteration", 84: "an integer overflow (too many nonzeros for 32-bit indices)"}
 
 
 class ConstraintTerm:
@@ -98,6 +107,8 @@ class System:
 
     def __init__(self, K, f_ext, bc_dofs, bc_values, nullspace, comm, max_it=50, contact_pc="auto", band_layers=1):
         self.comm = comm
+        # kept for _all_failed alone: no other collective ever runs on it, whatever the ranks were doing
+        self.agree_comm = comm.Dup()
         # contact_pc: "auto" | "band" | "none" (see preconditioner.py); band_dofs: size of the last band
         self.contact_pc, self.band_layers, self.band_dofs = contact_pc, band_layers, 0
         self.u = K.createVecRight()
@@ -373,7 +384,12 @@ class System:
                                      "package): check -qsc_pc_factor_mat_solver_type and "
                                      "-qsc_band_pc_factor_mat_solver_type") from None
                 if exc.ierr != PETSC_ERR_NOT_CONVERGED:
-                    raise
+                    if not _all_failed(self.agree_comm):
+                        raise
+                    raise ConvergenceError(
+                        f"PETSc error {exc.ierr} ({PETSC_ERRORS.get(exc.ierr, 'see its message')}) on every rank "
+                        f"inside the solve at load factor {t:.6g}; PETSc's message above names the routine (a "
+                        f"solver option the library rejects, e.g. one of -qsc_pc_hypre_*, is a usual cause)") from None
             if self.snes.getConvergedReason() > 0 or not self._more_mumps_workspace():
                 break
             u.destroy()
@@ -442,9 +458,23 @@ class System:
     def destroy(self):
         for name in self.own_options:
             PETSc.Options().delValue(name)
+        self.agree_comm.Free()
         self.snes.destroy()
         if self.J is not self.K:
             self.J.destroy()
+
+
+def _all_failed(comm, seconds=AGREE_SECONDS):
+    """True once every rank of comm (a communicator used for nothing else) has called this within `seconds`
+    of each other: an error every rank met, e.g. in a collective setup; False when some rank does not come
+    (it is still inside a PETSc collective the failed rank left): the caller cannot end the run cleanly."""
+    request = comm.Ibarrier()
+    deadline = time.monotonic() + seconds
+    while not request.Test():
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(0.002)
+    return True
 
 
 def extrapolate(before, t_b, u_b, t):
@@ -456,6 +486,14 @@ def extrapolate(before, t_b, u_b, t):
         start.axpy(w, u_b)
         start.axpy(-w, before[1])
     return start
+
+
+def _solve_at(system, step, t, u0):
+    """system.solve_at, its errors naming the load step."""
+    try:
+        return system.solve_at(t, u0)
+    except ConvergenceError as exc:
+        raise ConvergenceError(f"load step {step}: {exc}") from None
 
 
 def solve_load_step(system, step, t_prev, t_target, u, update_terms, max_cutbacks,
@@ -483,7 +521,7 @@ def solve_load_step(system, step, t_prev, t_target, u, update_terms, max_cutback
                              f"contact holds the normal direction only); add a boundary condition")
         path = None if failed else before          # a try after a failed one starts from the converged state
         start = extrapolate(path, t, u, t_try)
-        ok, u_new, stats = system.solve_at(t_try, start)
+        ok, u_new, stats = _solve_at(system, step, t_try, start)
         stats["predictor"] = "previous" if path is None else "extrapolated"
         start.destroy()
         augmented = [term for term in system.terms if term.augmented]
@@ -497,7 +535,7 @@ def solve_load_step(system, step, t_prev, t_target, u, update_terms, max_cutback
                 ok = False
                 stats["snes_reason"] = "AUGMENTED_LAGRANGIAN_MAX_IT"
                 break
-            ok, u_new, more = system.solve_at(t_try, u_new)
+            ok, u_new, more = _solve_at(system, step, t_try, u_new)
             stats["snes_iterations"] += more["snes_iterations"]
             stats["ksp_iterations"] += more["ksp_iterations"]
             stats["jacobian_assemblies"] += more["jacobian_assemblies"]

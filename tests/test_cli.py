@@ -353,6 +353,23 @@ def test_linear_solver_error_is_a_failed_solve(tmp_path, ranks):
     assert _summary(tmp_path / "out")["status"] == "failed"
 
 
+@pytest.mark.parametrize("ranks", RANKS)
+def test_library_error_in_the_solve_is_a_failed_solve(tmp_path, ranks):
+    """An option combination hypre accepts as options but rejects at its setup (nodal coarsening with vector
+    interpolation variant 2, hypre 2.26) fails inside the solve on every rank: exit 3 on all of them with one
+    line naming the PETSc error and the load step, summary.json "failed"; not an internal error, no abort."""
+    args = ["run", CONFIGS / "two_cubes_dies.toml", "--out", tmp_path / "out", "-qsc_ksp_type", "gmres",
+            "-qsc_pc_type", "hypre", "-qsc_pc_hypre_boomeramg_nodal_coarsen", "6",
+            "-qsc_pc_hypre_boomeramg_vec_interp_variant", "2"]
+    code, out = qsc(args, ranks)
+    assert code == 3, out
+    assert "Traceback" not in out and "internal error" not in out and "MPI_ABORT" not in out, out
+    failed = [line for line in own_lines(out) if line.startswith("qsc: solve failed: ")]
+    assert len(failed) == 1 and failed[0].startswith("qsc: solve failed: load step 1: PETSc error 76 "), out
+    summary = _summary(tmp_path / "out")
+    assert summary["status"] == "failed" and summary["error"] in failed[0]
+
+
 # ---------------------------------------------------------------- PETSc options
 
 def test_command_line_options_win_over_the_scene(tmp_path):
