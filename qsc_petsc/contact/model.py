@@ -211,7 +211,7 @@ class ContactModel:
         from contextlib import nullcontext
         return self.phases(name) if self.phases else nullcontext()
 
-    def _term(self, name, rows, eps_n, h, augmented):
+    def _term(self, name, rows, eps_n, h, augmented, node_local=False):
         mesh = self.mesh
         G = assembly.triplet_matrix(mesh, rows.G_rows, rows.G_cols, rows.G_vals)
         g = assembly.row_vector(mesh, rows.g_rows, rows.g_vals, self.template)
@@ -223,12 +223,12 @@ class ContactModel:
         gate = None
         if len(rows.gate_rows):
             gate = gate_positions(np.flatnonzero(exists) + r0, rows.gate_rows, rows.gate_of)
-        return ConstraintTerm(name, G, g, W, rows.phi, eps_n, closed, gate, augmented)
+        return ConstraintTerm(name, G, g, W, rows.phi, eps_n, closed, gate, augmented, node_local)
 
     def terms(self, u, t):
         """New search at the current displacement u, load factor t: one ConstraintTerm per pair and die."""
         for term in self.current:
-            term.G.destroy()
+            term.destroy()
         mesh = self.mesh
         U = self.mesh.local_vectors(u)
         X = mesh.coords
@@ -270,7 +270,7 @@ class ContactModel:
                 near = gap <= dd["radius"]
                 rows = row_builders.die_rows(mesh.gvert[v[near]], dd["area"][near], X[v[near]], spec.point, n,
                                              u_die, spec.condition == "sticking")
-                out.append(self._term(f"die[{dd['index']}]", rows, dd["eps_n"], dd["h"], False))
+                out.append(self._term(f"die[{dd['index']}]", rows, dd["eps_n"], dd["h"], False, node_local=True))
         self.current = out
         return out
 
@@ -369,7 +369,7 @@ class ContactModel:
 
     def destroy(self):
         for term in self.current:
-            term.G.destroy()
+            term.destroy()
         self.current = []
 
 
