@@ -131,15 +131,15 @@ def wants_band(mode, has_pairs):
     return mode == "band" or amg_type() in AMG_TYPES
 
 
-def install_band_pc(ksp, K, couplings, layers, comm):
-    """Give ksp a fresh composite PC: the multigrid, then the exact solve on the contact band (BandSolve).
+def install_band_pc(ksp, band, comm):
+    """Give ksp a fresh composite PC: the multigrid, then the exact solve on the contact band (BandSolve), whose
+    dofs (this rank's, from band_dofs) are `band`.
 
     When the options name no KSP, it becomes GMRES (right-preconditioned, as the true-residual test
     needs) with the multiplicative composite, one V-cycle per iteration; a named CG gets the
     symmetric-multiplicative one (so CG stays valid, at two V-cycles per iteration), any other KSP the
     multiplicative one. Returns the global number of band dofs. A fresh PC per search: the band follows
     the new rows."""
-    band = band_dofs(K, couplings, layers)
     if comm.allreduce(len(band)) == 0:
         return 0                        # no row within reach: nothing stiff to take out, plain options
     krylov = option_value("ksp_type")
@@ -162,3 +162,4 @@ def install_band_pc(ksp, K, couplings, layers, comm):
     remove_options(added)               # BoomerAMG has read them
     ksp.setPC(pc)
     return comm.allreduce(len(band))
+

@@ -167,6 +167,8 @@ class System:
         # per term that couples nodes (not node_local), a digest of this rank's G^T G pattern at the last search:
         # a search whose rows couple the same dofs keeps J's pattern (set_terms)
         self.stencil_signature = None
+        # this rank's dofs of the contact band the installed preconditioner solves exactly (None: no band)
+        self.band = None
         self.jacobian_rebuilds = 0
         # the Krylov stop follows the Newton test (KSP atol = KRYLOV_MARGIN x SNES target) unless the user set one
         self.ksp_atol_auto = options.option_value("ksp_atol") is None
@@ -214,9 +216,11 @@ class System:
         # a die's rows act on one node each: its stencil is inside K's pattern already
         coupling = [GtG for term, GtG in zip(terms, stencils) if not term.node_local]
         signature = [_pattern_digest(GtG) for GtG in coupling]
+        kept = bool(terms) and self.J is not self.K and self.comm.allreduce(signature == self.stencil_signature,
+                                                                             op=MPI.LAND)
         if not terms:
             self.J = self.K
-        elif self.J is not self.K and self.comm.allreduce(signature == self.stencil_signature, op=MPI.LAND):
+        elif kept:
             # the new rows couple the same dofs as the last search's (a flat contact): J keeps its pattern
             self.J.zeroEntries()
             self.J.axpy(1.0, self.K, SUBSET)
@@ -238,8 +242,14 @@ class System:
         self.jacobian_d = [np.zeros_like(term.d) for term in terms]
         pairs = [GtG for term, GtG in zip(terms, stencils) if term.name.startswith("contact")]
         if preconditioner.wants_band(self.contact_pc, bool(pairs)):
-            self.band_dofs = preconditioner.install_band_pc(self.snes.getKSP(), self.K, pairs,
-                                                            self.band_layers, self.comm)
+            band = preconditioner.band_dofs(self.K, pairs, self.band_layers)
+            # J's pattern and the band of the last search keep its preconditioner objects: the next setup is
+            # numeric only (the band's symbolic factorization and the composite's construction are not redone)
+            same = kept and self.band is not None and self.comm.allreduce(np.array_equal(band, self.band),
+                                                                           op=MPI.LAND)
+            if not same:
+                self.band_dofs = preconditioner.install_band_pc(self.snes.getKSP(), band, self.comm)
+                self.band = band
         self.prev_active = None
 
     def _residual(self, snes, u, f):

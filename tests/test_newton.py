@@ -44,6 +44,30 @@ def test_unchanged_active_set_keeps_the_jacobian(tmp_path):
     assert np.abs(u - ref).max() <= 1e-8 * np.abs(ref).max()
 
 
+def test_search_with_the_same_coupling_keeps_jacobian_and_band(tmp_path, monkeypatch):
+    """The second increment's search of the flat two-cube contact couples the same dofs: J keeps its pattern
+    (the same matrix, reset to K) and the band's preconditioner objects stay; the answer is MUMPS's. A contact
+    pair's G^T G lies outside K's pattern, the dies' inside it (node_local)."""
+    seen = []
+    original = System.set_terms
+
+    def spy(self, terms):
+        original(self, terms)
+        pc = self.snes.getKSP().getPC()
+        seen.append((self.J.handle, pc.handle, pc.getType(), [t.node_local for t in terms]))
+
+    monkeypatch.setattr(System, "set_terms", spy)
+    run, summary = run_scene(scene_without_petsc(tmp_path), tmp_path / "iterative", SMALL)
+    assert summary["status"] == "ok" and len(seen) == 2
+    (j1, pc1, kind, local), (j2, pc2, _, _) = seen
+    assert kind == "composite" and (j1, pc1) == (j2, pc2)
+    assert local == [False, True, True]                 # contact[0], die[0], die[1]
+    u = run.u.getArray().copy()
+    direct, _ = run_scene(CONFIGS / "two_cubes_dies.toml", tmp_path / "direct", SMALL)
+    ref = direct.u.getArray()
+    assert np.abs(u - ref).max() <= 1e-8 * np.abs(ref).max()
+
+
 def test_krylov_stops_at_the_newton_target(tmp_path):
     """With the true-residual norm the KSP's absolute tolerance is KRYLOV_MARGIN x snes_rtol x the force
     scale of the current iterate (the last Newton step's, within 1e-6 of the final one); a ksp_atol the user sets stays."""
