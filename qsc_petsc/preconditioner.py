@@ -138,8 +138,9 @@ def install_band_pc(ksp, band, comm):
     When the options name no KSP, it becomes GMRES (right-preconditioned, as the true-residual test
     needs) with the multiplicative composite, one V-cycle per iteration; a named CG gets the
     symmetric-multiplicative one (so CG stays valid, at two V-cycles per iteration), any other KSP the
-    multiplicative one. Returns the global number of band dofs. A fresh PC per search: the band follows
-    the new rows."""
+    multiplicative one. Returns the global number of band dofs. A search whose band and Jacobian pattern are
+    the last one's keeps the PC it has (System.set_terms); any other gets a fresh one: the band follows the
+    new rows."""
     if comm.allreduce(len(band)) == 0:
         return 0                        # no row within reach: nothing stiff to take out, plain options
     krylov = option_value("ksp_type")
@@ -162,4 +163,3 @@ def install_band_pc(ksp, band, comm):
     remove_options(added)               # BoomerAMG has read them
     ksp.setPC(pc)
     return comm.allreduce(len(band))
-

@@ -68,6 +68,44 @@ def test_search_with_the_same_coupling_keeps_jacobian_and_band(tmp_path, monkeyp
     assert np.abs(u - ref).max() <= 1e-8 * np.abs(ref).max()
 
 
+DIE_BLOCK = """
+name = "die_block"
+[[bodies]]
+name = "block"
+mesh = { type = "box", size = [1.0, 1.0, 2.0], cells = [3, 3, 6] }
+material = { youngs_modulus = 1000.0, poissons_ratio = 0.3 }
+[[die]]
+name = "bottom"
+point = [0.0, 0.0, 0.0]
+normal = [0.0, 0.0, 1.0]
+surfaces = ["block.zmin"]
+condition = "sticking"
+[[die]]
+name = "top"
+point = [0.0, 0.0, 2.0]
+normal = [0.0, 0.0, -1.0]
+motion = [0.0, 0.0, -0.02]
+surfaces = ["block.zmax"]
+condition = "sticking"
+[load]
+steps = 3
+"""
+
+
+def test_search_with_the_same_rows_keeps_the_jacobian_as_it_is(tmp_path):
+    """A block between two dies: every search finds the same die rows, so J keeps its stiffnesses and, the
+    active set unchanged, no increment after the first assembles a Jacobian or rebuilds its preconditioner;
+    the answer is the direct solver's."""
+    scene = tmp_path / "die_block.toml"
+    scene.write_text(DIE_BLOCK)
+    run, summary = run_scene(scene, tmp_path / "iterative")
+    assert [s["jacobian_assemblies"] for s in _solves(summary)] == [1, 0, 0]
+    u = run.u.getArray().copy()
+    direct, _ = run_scene(scene, tmp_path / "direct", ["petsc.ksp_type=preonly", "petsc.pc_type=lu"])
+    ref = direct.u.getArray()
+    assert np.abs(u - ref).max() <= 1e-8 * np.abs(ref).max()
+
+
 def test_krylov_stops_at_the_newton_target(tmp_path):
     """With the true-residual norm the KSP's absolute tolerance is KRYLOV_MARGIN x snes_rtol x the force
     scale of the current iterate (the last Newton step's, within 1e-6 of the final one); a ksp_atol the user sets stays."""
