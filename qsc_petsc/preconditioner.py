@@ -75,14 +75,58 @@ def band_dofs(K, couplings, layers=1):
     return np.asarray(band, dtype=PETSc.IntType)
 
 
+class Parts:
+    """What the two parts of a band composite share: keep = True leaves their setups as they are however the
+    operator changes (System decides: a new search that moved only the projections). PETSc's own reuse flag
+    cannot say it: the composite passes it down to its parts at every application, and SNES resets it after
+    every Jacobian."""
+
+    def __init__(self):
+        self.keep = False
+
+
+class MultigridPart:
+    """PCPYTHON context: the band composite's multigrid (hypre or gamg, tuned by -qsc_pc_*), set up again
+    unless parts.keep."""
+
+    def __init__(self, inner, parts):
+        self.inner, self.parts = inner, parts
+        self.ready = False
+
+    def setUp(self, pc):
+        self.inner.setReusePreconditioner(self.parts.keep and self.ready)
+        if self.parts.keep and self.ready:
+            return
+        A, P = pc.getOperators()
+        self.inner.setOperators(A, P)
+        self.inner.setUp()
+        self.ready = True
+
+    def apply(self, pc, x, y):
+        self.inner.apply(x, y)
+
+    def view(self, pc, viewer):
+        self.inner.view(viewer)
+
+    def destroy(self, pc=None):
+        try:
+            self.inner.destroy()
+        except PETSc.Error:
+            # after a failed setup hypre's error flag stays set and every later hypre call fails, its destroy
+            # included (a failed run is released before exit: cli.release); the process ends without it
+            pass
+
+
 class BandSolve:
     """PCPYTHON context: the exact solve on the band, y = J_bb^-1 x on the band dofs and 0 elsewhere.
 
     One factorization of the band's submatrix across all ranks (MUMPS Cholesky by default, options
     -qsc_band_*): where the partition cuts the contact interface, overlapping per-rank blocks summed
-    their corrections and cost a third more iterations (two cubes, 70k dofs: 123 against 83)."""
+    their corrections and cost a third more iterations (two cubes, 70k dofs: 123 against 83). Not
+    factored again while parts.keep."""
 
-    def __init__(self, band, comm):
+    def __init__(self, band, comm, parts=None):
+        self.parts = parts or Parts()
         self.iset = PETSc.IS().createGeneral(band, comm=comm)
         ksp = PETSc.KSP().create(comm=comm)
         ksp.setOptionsPrefix("qsc_band_")
@@ -96,6 +140,8 @@ class BandSolve:
         self.sub = self.scatter = self.xb = self.yb = None
 
     def setUp(self, pc):
+        if self.parts.keep and self.sub is not None:
+            return
         _, P = pc.getOperators()
         self.sub = P.createSubMatrix(self.iset, self.iset, submat=self.sub)
         self.ksp.setOperators(self.sub)
@@ -138,11 +184,11 @@ def install_band_pc(ksp, band, comm):
     When the options name no KSP, it becomes GMRES (right-preconditioned, as the true-residual test
     needs) with the multiplicative composite, one V-cycle per iteration; a named CG gets the
     symmetric-multiplicative one (so CG stays valid, at two V-cycles per iteration), any other KSP the
-    multiplicative one. Returns the global number of band dofs. A search whose band and Jacobian pattern are
-    the last one's keeps the PC it has (System.set_terms); any other gets a fresh one: the band follows the
-    new rows."""
+    multiplicative one. Returns the global number of band dofs and the Parts the two share (None without a
+    band). A search whose band and Jacobian pattern are the last one's keeps the PC it has
+    (System.set_terms); any other gets a fresh one: the band follows the new rows."""
     if comm.allreduce(len(band)) == 0:
-        return 0                        # no row within reach: nothing stiff to take out, plain options
+        return 0, None                  # no row within reach: nothing stiff to take out, plain options
     krylov = option_value("ksp_type")
     added = insert_options(HYPRE_DEFAULTS) if amg_type() == "hypre" else {}   # read once below, then removed
     pc = PETSc.PC().create(comm=comm)
@@ -154,12 +200,22 @@ def install_band_pc(ksp, band, comm):
         ksp.setPCSide(PETSc.PC.Side.RIGHT)   # left-preconditioned GMRES cannot test the true residual
     pc.setCompositeType(PETSc.PC.CompositeType.SYMMETRIC_MULTIPLICATIVE if krylov == "cg"
                         else PETSc.PC.CompositeType.MULTIPLICATIVE)
-    pc.addCompositePCType(amg_type())
     pc.addCompositePCType("python")
-    amg, exact = pc.getCompositePC(0), pc.getCompositePC(1)
+    pc.addCompositePCType("python")
+    amg = PETSc.PC().create(comm=comm)
+    amg.setType(amg_type())
     amg.setOptionsPrefix("qsc_")         # -qsc_pc_hypre_* / -qsc_pc_gamg_* tune it as they tune a plain PC
-    exact.setPythonContext(BandSolve(band, comm))
     set_from_options(amg, "contact band's multigrid (-qsc_pc_*)")
     remove_options(added)               # BoomerAMG has read them
+    parts = Parts()
+    pc.getCompositePC(0).setPythonContext(MultigridPart(amg, parts))
+    pc.getCompositePC(1).setPythonContext(BandSolve(band, comm, parts))
     ksp.setPC(pc)
-    return comm.allreduce(len(band))
+    return comm.allreduce(len(band)), parts
+
+
+def multigrid(pc):
+    """The multigrid PC of a band composite (install_band_pc), else None."""
+    if pc.getType() != "composite":
+        return None
+    return pc.getCompositePC(0).getPythonContext().inner

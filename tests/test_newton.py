@@ -46,8 +46,9 @@ def test_unchanged_active_set_keeps_the_jacobian(tmp_path):
 
 def test_search_with_the_same_coupling_keeps_jacobian_and_band(tmp_path, monkeypatch):
     """The second increment's search of the flat two-cube contact couples the same dofs: J keeps its pattern
-    (the same matrix, reset to K) and the band's preconditioner objects stay; the answer is MUMPS's. A contact
-    pair's G^T G lies outside K's pattern, the dies' inside it (node_local)."""
+    (the same matrix, reset to K) and the band's preconditioner objects stay, and with the same rows active
+    its setup too (only the projections moved); the answer is MUMPS's. A contact pair's G^T G lies outside
+    K's pattern, the dies' inside it (node_local)."""
     seen = []
     original = System.set_terms
 
@@ -62,6 +63,7 @@ def test_search_with_the_same_coupling_keeps_jacobian_and_band(tmp_path, monkeyp
     (j1, pc1, kind, local), (j2, pc2, _, _) = seen
     assert kind == "composite" and (j1, pc1) == (j2, pc2)
     assert local == [False, True, True]                 # contact[0], die[0], die[1]
+    assert run.system.band_parts.keep                   # the second increment kept the first one's setup
     u = run.u.getArray().copy()
     direct, _ = run_scene(CONFIGS / "two_cubes_dies.toml", tmp_path / "direct", SMALL)
     ref = direct.u.getArray()

@@ -10,13 +10,15 @@ ITERATIVE = ["petsc.ksp_type=cg", *MESHES]
 
 
 def solve(comm, tmp, sets, path=CONFIGS / "patch_test.toml", base=ITERATIVE):
+    from qsc_petsc.preconditioner import multigrid
     from qsc_petsc.run import Run
     from qsc_petsc.scene import load_scene
     run = Run(load_scene(path, base + sets), comm, tmp, log=lambda *a: None)
     s = run.execute()
     band = run.system.band_dofs
     pc = run.system.snes.getKSP().getPC()
-    s["multigrid"] = pc.getCompositePC(0).getType() if pc.getType() == "composite" else None
+    amg = multigrid(pc)
+    s["multigrid"] = amg.getType() if amg is not None else None
     s["krylov"] = run.system.snes.getKSP().getType()
     run.destroy()
     pair = next(iter(s["steps"][-1]["contact"].values()))
