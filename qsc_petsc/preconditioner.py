@@ -16,7 +16,9 @@ BoomerAMG's settings (HMIS coarsening, ext+i interpolation, at most 4 weights pe
 threshold 0.5, one level of aggressive coarsening: the usual 3-D elasticity choices; one forward
 l1-Gauss-Seidel sweep down and one backward sweep up) are defaults that any `-qsc_pc_hypre_*` option overrides. The multigrid reads the system's own
 options (`-qsc_pc_*`); the band is one submatrix across all ranks, factored once per new Jacobian
-(`-qsc_band_*`: default preonly + Cholesky with MUMPS).
+(`-qsc_band_*`: default preonly + Cholesky with MUMPS). Both parts are Python contexts in a PETSc composite
+sharing a Parts flag, so that System can keep their setups across a new search that moved only the
+projections.
 """
 
 import numpy as np
