@@ -217,9 +217,9 @@ def test_cycle_watch_damps_from_a_returning_active_set():
 def test_round_off_floor_rule():
     """A step taken with the final active set and a converged Krylov solve that does not halve the residual,
     near the target, is the round-off floor; a residual that halves, one far above the target (a stalled
-    Newton method), a failed Krylov solve or the first step are not."""
-    def floor(it, fnorm, last, target=1e-12, ksp_reason=2):
-        ksp = SimpleNamespace(getConvergedReason=lambda: ksp_reason)
+    Newton method), a failed Krylov solve, the first step or a direct solve's step are not."""
+    def floor(it, fnorm, last, target=1e-12, ksp_reason=2, ksp_type="cg"):
+        ksp = SimpleNamespace(getConvergedReason=lambda: ksp_reason, getType=lambda: ksp_type)
         ns = SimpleNamespace(snes=SimpleNamespace(getKSP=lambda: ksp))
         return System._on_floor(ns, it, fnorm, last, target)
 
@@ -228,6 +228,7 @@ def test_round_off_floor_rule():
     assert not floor(2, 2 * FLOOR_SPAN * 1e-12, 2.1 * FLOOR_SPAN * 1e-12)   # stalled far above the target
     assert not floor(2, 9e-12, 1e-11, ksp_reason=-3)              # the Krylov solve failed
     assert not floor(1, 9e-12, 1e-11)                             # the first step is measured from F(u0)
+    assert not floor(2, 9e-12, 1e-11, ksp_type="preonly")         # a direct solve's next step still refines
 
 
 def test_damped_steps_reach_the_same_answer(tmp_path, monkeypatch):
