@@ -8,9 +8,12 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from conftest import CONFIGS, run_scene
+from conftest import CONFIGS, ROOT, run_scene
 from mpi4py import MPI
 from petsc4py import PETSc
+
+sys.path.insert(0, str(ROOT / "scripts"))
+import bench_contact
 
 from qsc_petsc.solver import FLOOR_SPAN, KRYLOV_MARGIN, START_REACH, START_TOUCHING, System
 
@@ -70,40 +73,16 @@ def test_search_with_the_same_coupling_keeps_jacobian_and_band(tmp_path, monkeyp
     assert np.abs(u - ref).max() <= 1e-8 * np.abs(ref).max()
 
 
-DIE_BLOCK = """
-name = "die_block"
-[[bodies]]
-name = "block"
-mesh = { type = "box", size = [1.0, 1.0, 2.0], cells = [3, 3, 6] }
-material = { youngs_modulus = 1000.0, poissons_ratio = 0.3 }
-[[die]]
-name = "bottom"
-point = [0.0, 0.0, 0.0]
-normal = [0.0, 0.0, 1.0]
-surfaces = ["block.zmin"]
-condition = "sticking"
-[[die]]
-name = "top"
-point = [0.0, 0.0, 2.0]
-normal = [0.0, 0.0, -1.0]
-motion = [0.0, 0.0, -0.02]
-surfaces = ["block.zmax"]
-condition = "sticking"
-[load]
-steps = 3
-"""
-
-
 def test_search_with_the_same_rows_keeps_the_jacobian_as_it_is(tmp_path):
     """A block between two dies: every search finds the same die rows, so J keeps its stiffnesses and, the
     active set unchanged, no increment after the first assembles a Jacobian or rebuilds its preconditioner;
     the answer is the direct solver's."""
     scene = tmp_path / "die_block.toml"
-    scene.write_text(DIE_BLOCK)
-    run, summary = run_scene(scene, tmp_path / "iterative")
+    scene.write_text(bench_contact.scene(2, "merged"))        # a 3 x 3 x 6 block between sticking dies
+    run, summary = run_scene(scene, tmp_path / "iterative", ["load.steps=3"])
     assert [s["jacobian_assemblies"] for s in _solves(summary)] == [1, 0, 0]
     u = run.u.getArray().copy()
-    direct, _ = run_scene(scene, tmp_path / "direct", ["petsc.ksp_type=preonly", "petsc.pc_type=lu"])
+    direct, _ = run_scene(scene, tmp_path / "direct", ["load.steps=3", "petsc.ksp_type=preonly", "petsc.pc_type=lu"])
     ref = direct.u.getArray()
     assert np.abs(u - ref).max() <= 1e-8 * np.abs(ref).max()
 
