@@ -69,9 +69,23 @@ class Phases:
         return dict(zip(names, worst.tolist()))
 
 
+def peak_rss_mib():
+    """This process's peak resident set [MiB]: VmHWM where /proc has it. getrusage's ru_maxrss is not the
+    process's own on Linux: exec keeps the high-water mark of the image it replaced, so a run started from a
+    large Python process (qsc sweep after loading its reference solution) reported that process's size
+    (1547 MiB for a run that peaks at 1012)."""
+    try:
+        with open("/proc/self/status") as status:
+            for line in status:
+                if line.startswith("VmHWM:"):
+                    return int(line.split()[1]) / 1024.0          # kB
+    except OSError:
+        pass
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0     # KiB on Linux
+
+
 def peak_memory_mib(comm):
-    rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0     # KiB on Linux
-    per_rank = comm.allgather(rss)
+    per_rank = comm.allgather(peak_rss_mib())
     return {"max_rank": max(per_rank), "total": sum(per_rank), "per_rank": per_rank}
 
 

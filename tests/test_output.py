@@ -218,3 +218,17 @@ def test_nested_phases_add_up_to_the_run():
     assert seconds["rows"] >= 0.05
     assert seconds["solve"] >= 0.04
     assert seconds["solve"] == pytest.approx(wall - seconds["rows"], abs=5e-3)   # without the rows' time
+
+
+def test_peak_memory_is_the_run_process_own():
+    """A run started from a large process reports its own peak resident set, not its parent's: exec keeps the
+    replaced image's high-water mark in getrusage's ru_maxrss (qsc sweep's runs reported the sweep's size)."""
+    import subprocess
+    import sys
+    ballast = np.ones(60_000_000)                   # 480 MB touched in this process, the child's parent
+    code = ("import resource; from qsc_petsc.run import peak_rss_mib; "
+            "print(peak_rss_mib(), resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024)")
+    own, inherited = map(float, subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                                               check=True).stdout.split())
+    assert ballast.sum() > 0
+    assert own < 300 and inherited > 450
