@@ -211,10 +211,13 @@ class System:
             options.remove_options(added)
 
     def set_terms(self, terms):
-        """Install the constraint terms of a new search; rebuild the Jacobian's sparsity once.
+        """Install the constraint terms of a new search, keeping what it did not change (collective).
 
-        J gets the union of K's pattern and every term's G^T G, with the terms' part zero (jacobian_d:
-        the rows' stiffnesses J holds); _jacobian then adds only what the active set changes."""
+        J holds the union of K's pattern and every term's G^T G, with the rows' stiffnesses jacobian_d;
+        _jacobian then adds only what the active set changes. The very same rows as the last search keep J
+        and its stiffnesses; a coupling stencil with the last one's pattern keeps J's pattern (values reset
+        to K); any other search builds J anew. The contact band's preconditioner objects stay when J's
+        pattern and the band do (_keep_or_rebuild_pc may then keep its setup too)."""
         self.terms = terms
         # G^T G of every term (the terms keep the product for their Jacobians): the Jacobian's contact stencil,
         # and the contact pairs' band for the preconditioner
