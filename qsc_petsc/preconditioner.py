@@ -96,8 +96,9 @@ class MultigridPart:
         self.ready = False
 
     def setUp(self, pc):
-        self.inner.setReusePreconditioner(self.parts.keep and self.ready)
-        if self.parts.keep and self.ready:
+        keep = self.parts.keep and self.ready
+        self.inner.setReusePreconditioner(keep)
+        if keep:
             return
         A, P = pc.getOperators()
         self.inner.setOperators(A, P)

@@ -237,8 +237,7 @@ class System:
             pass
         elif kept:
             # the new rows couple the same dofs as the last search's (a flat contact): J keeps its pattern
-            self.J.zeroEntries()
-            self.J.axpy(1.0, self.K, SUBSET)
+            self._reset_to_stiffness(self.J)
         else:
             J = self.K.copy()
             if coupling:
@@ -256,9 +255,9 @@ class System:
         self.snes.setJacobian(self._jacobian, self.J, self.J)
         if not same_rows:
             self.jacobian_d = [np.zeros_like(term.d) for term in terms]
-        pairs = [GtG for term, GtG in zip(terms, stencils) if term.name.startswith("contact")]
-        if preconditioner.wants_band(self.contact_pc, bool(pairs)):
-            band = preconditioner.band_dofs(self.K, pairs, self.band_layers)
+        # the stencils that couple nodes are the contact pairs' (dies are node-local): the band follows them
+        if preconditioner.wants_band(self.contact_pc, bool(coupling)):
+            band = preconditioner.band_dofs(self.K, coupling, self.band_layers)
             # J's pattern and the band of the last search keep its preconditioner objects: the next setup is
             # numeric only (the band's symbolic factorization and the composite's construction are not redone)
             same = kept and self.band is not None and self.comm.allreduce(np.array_equal(band, self.band),
@@ -306,8 +305,7 @@ class System:
         if changed.max() == 2:
             # a row opened: subtracting its penalty (1e2-1e10 x K) would leave round-off of that size in J,
             # enough to make a free body's singular J solvable and its iterates jump; rebuild from K instead
-            J.zeroEntries()
-            J.axpy(1.0, self.K, SUBSET)
+            self._reset_to_stiffness(J)
             held = [np.zeros_like(term.d) for term in self.terms]
             changed = np.ones_like(changed)
         else:
@@ -320,6 +318,11 @@ class System:
             J.axpy(1.0, Jc, SUBSET)
         self.jacobian_d = [term.d.copy() for term in self.terms]
 
+    def _reset_to_stiffness(self, J):
+        """J's values set to K's, its pattern (K's and the contact stencil's) kept."""
+        J.zeroEntries()
+        J.axpy(1.0, self.K, SUBSET)
+
     def _keep_or_rebuild_pc(self, j_changes):
         """Whether the band preconditioner stays as it is for the next linear solves (collective). The first
         Jacobian of a search that kept J's pattern and the band (set_terms) keeps it when the rows active now
@@ -329,12 +332,9 @@ class System:
         if self.band_parts is None:
             return
         digest = None
-        if self.pc_candidate or j_changes:
-            h = hashlib.blake2b(digest_size=16)
-            for term in self.terms:
-                h.update(term.name.encode())
-                h.update((term.c.getOwnershipRange()[0] + term.rows[term.active]).astype(np.int64).tobytes())
-            digest = h.digest()
+        if self.pc_candidate or j_changes:     # the global ids of the active rows, term by term
+            digest = _digest(*[np.append(term.c.getOwnershipRange()[0] + term.rows[term.active], -1)
+                               for term in self.terms])
         if self.pc_candidate:
             self.pc_candidate = False
             self.pc_stale = self.comm.allreduce(digest == self.pc_rows, op=MPI.LAND)
@@ -551,22 +551,23 @@ class System:
             self.J.destroy()
 
 
+def _digest(*arrays):
+    """A 16-byte digest of the arrays' contents (this rank's: compare them with an allreduce)."""
+    h = hashlib.blake2b(digest_size=16)
+    for arr in arrays:
+        h.update(np.ascontiguousarray(arr).tobytes())
+    return h.digest()
+
+
 def _pattern_digest(A):
     """A digest of this rank's rows of A's nonzero pattern."""
     ia, ja, _ = A.getValuesCSR()
-    h = hashlib.blake2b(digest_size=16)
-    h.update(np.ascontiguousarray(ia).tobytes())
-    h.update(np.ascontiguousarray(ja).tobytes())
-    return h.digest()
+    return _digest(ia, ja)
 
 
 def _rows_digest(term):
     """A digest of this rank's part of a term's rows: G's pattern and values and which rows exist."""
-    ia, ja, a = term.G.getValuesCSR()
-    h = hashlib.blake2b(digest_size=16)
-    for arr in (ia, ja, a, term.rows):
-        h.update(np.ascontiguousarray(arr).tobytes())
-    return h.digest()
+    return _digest(*term.G.getValuesCSR(), term.rows)
 
 
 def _all_failed(comm, seconds=AGREE_SECONDS):
