@@ -39,6 +39,14 @@ def run_scene(scene_path, out, overrides=(), comm=MPI.COMM_WORLD):
     return run, summary
 
 
+def scene_without_petsc(folder, petsc=""):
+    """configs/two_cubes_dies.toml with its [petsc] table (MUMPS) replaced by `petsc`: the defaults if empty."""
+    text = (CONFIGS / "two_cubes_dies.toml").read_text()
+    path = folder / "scene.toml"
+    path.write_text(text[:text.index("[petsc]")] + (f"[petsc]\n{petsc}\n" if petsc else ""))
+    return path
+
+
 def all_close(comm, ok):
     """True on every rank iff ok on every rank (assert only on such values under MPI)."""
     return comm.allreduce(bool(ok), op=MPI.LAND)

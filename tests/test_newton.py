@@ -8,7 +8,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from conftest import CONFIGS, ROOT, run_scene
+from conftest import CONFIGS, ROOT, run_scene, scene_without_petsc
 from mpi4py import MPI
 from petsc4py import PETSc
 
@@ -23,14 +23,6 @@ SMALL = ["bodies.0.mesh.cells=[3,3,3]", "bodies.1.mesh.cells=[4,4,4]"]
 def _solves(summary):
     """Every SNES solve of a run's summary, increment by increment."""
     return [s for step in summary["steps"] for s in step["solves"]]
-
-
-def scene_without_petsc(tmp_path, petsc=""):
-    """configs/two_cubes_dies.toml with its [petsc] table (MUMPS) replaced by `petsc`: the defaults if empty."""
-    text = (CONFIGS / "two_cubes_dies.toml").read_text()
-    path = tmp_path / "scene.toml"
-    path.write_text(text[:text.index("[petsc]")] + (f"[petsc]\n{petsc}\n" if petsc else ""))
-    return path
 
 
 def test_unchanged_active_set_keeps_the_jacobian(tmp_path):

@@ -205,6 +205,7 @@ class ContactModel:
         self.pairs = contact_pairs_data(mesh, scene, template)
         self.dies = die_data(mesh, scene, template)
         self.current = []
+        self.fixed = set()         # the terms of small-sliding pairs, searched once (terms)
         self.t = 0.0
 
     def _phase(self, name):
@@ -226,9 +227,13 @@ class ContactModel:
         return ConstraintTerm(name, G, g, W, rows.phi, eps_n, closed, gate, augmented, node_local)
 
     def terms(self, u, t):
-        """New search at the current displacement u, load factor t: one ConstraintTerm per pair and die."""
+        """New search at the current displacement u, load factor t: one ConstraintTerm per pair and die; a pair
+        with small sliding keeps the term of its first search (its rows and, with the augmented Lagrangian,
+        its multipliers)."""
+        kept = {term.name: term for term in self.current if term.name in self.fixed}
         for term in self.current:
-            term.destroy()
+            if term.name not in kept:
+                term.destroy()
         mesh = self.mesh
         U = self.mesh.local_vectors(u)
         X = mesh.coords
@@ -236,6 +241,10 @@ class ContactModel:
         out = []
         for pd in self.pairs:
             spec = pd["spec"]
+            name = f"contact[{pd['index']}]"
+            if name in kept:
+                out.append(kept[name])
+                continue
             with self._phase("search"):
                 sp = integration_pass(mesh, spec, pd["slave"], pd["master"], X, U, pd["radius"])
                 mp = None
@@ -256,10 +265,11 @@ class ContactModel:
                                                                          move=self._to_row_owners)
                     else:
                         rows = row_builders.quasi_symmetric(sp, mp, weight)
-                term = self._term(f"contact[{pd['index']}]", rows, pd["eps_n"], pd["h_eff"],
-                                  spec.enforcement == "augmented_lagrangian")
+                term = self._term(name, rows, pd["eps_n"], pd["h_eff"], spec.enforcement == "augmented_lagrangian")
                 term.points = points
                 out.append(term)
+                if spec.sliding == "small":
+                    self.fixed.add(name)
         for dd in self.dies:
             spec = dd["spec"]
             with self._phase("rows"):
@@ -398,7 +408,9 @@ def contact_plan(mesh, scene):
         rows = mesh.comm.allreduce(len(term.rows), op=MPI.SUM)
         lines.append(f"contact[{pd['index']}]: {spec.slave} (slave) / {spec.master} (master), {spec.formulation}, "
                      f"{spec.enforcement}; h_eff {pd['h_eff']:.4g} m, eps_n {pd['eps_n']:.4g} Pa/m, "
-                     f"search radius {pd['radius']:.4g} m; {rows} candidate rows at the start")
+                     f"search radius {pd['radius']:.4g} m, {spec.sliding} sliding (searched "
+                     f"{'once' if spec.sliding == 'small' else 'at every load step'}); {rows} candidate rows at "
+                     f"the start")
     for dd, term in zip(model.dies, terms[len(model.pairs):]):
         spec = dd["spec"]
         rows = mesh.comm.allreduce(len(term.rows), op=MPI.SUM)

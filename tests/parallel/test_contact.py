@@ -74,13 +74,10 @@ def test_block_between_rigid_dies_is_uniaxial(comm, mpi_tmp):
     run.destroy()
 
 
-@pytest.mark.parametrize("formulation", FORMULATIONS)
-def test_rank_invariance_non_matching(comm, mpi_tmp, formulation):
-    """Non-matching patch test: the summary on N ranks equals the serial one to 1e-8 relative."""
+def _on_all_and_one_rank(comm, mpi_tmp, scene):
+    """The last step's summary quantities of the scene run on comm and on each rank alone, and the summaries."""
     from qsc_petsc.run import Run
-    from qsc_petsc.scene import load_scene
-    scene = load_scene(CONFIGS / "patch_test.toml", [f"contact.0.formulation={formulation}"])
-    out = []
+    out, summaries = [], []
     for c in (comm, MPI.COMM_SELF):
         run = Run(scene, c, mpi_tmp / ("w" if c is comm else f"s{comm.rank}"), log=lambda *a: None)
         s = run.execute()
@@ -88,8 +85,29 @@ def test_rank_invariance_non_matching(comm, mpi_tmp, formulation):
         out.append([s["steps"][-1]["max_abs_displacement"], pair["total_normal_force"],
                     pair["max_penetration_slave"], pair["max_penetration_master"], pair["contact_area"],
                     float(pair["active_rows"]), float(pair["rows"])])
+        summaries.append(s)
         run.destroy()
+    return out, summaries
+
+
+@pytest.mark.parametrize("formulation", FORMULATIONS)
+def test_rank_invariance_non_matching(comm, mpi_tmp, formulation):
+    """Non-matching patch test: the summary on N ranks equals the serial one to 1e-8 relative."""
+    from qsc_petsc.scene import load_scene
+    scene = load_scene(CONFIGS / "patch_test.toml", [f"contact.0.formulation={formulation}"])
+    out, _ = _on_all_and_one_rank(comm, mpi_tmp, scene)
     assert all_close(comm, np.allclose(out[0], out[1], rtol=1e-8, atol=1e-14))
+
+
+def test_small_sliding_rank_invariance(comm, mpi_tmp):
+    """Small sliding (rows of one search kept over 3 load steps, two cubes between dies, MUMPS): N ranks give
+    the serial summary to 1e-8 relative, and every increment after the first is one Newton step."""
+    from qsc_petsc.scene import load_scene
+    scene = load_scene(CONFIGS / "two_cubes_dies.toml", ["bodies.0.mesh.cells=[3,3,3]", "bodies.1.mesh.cells=[4,4,4]",
+                                                          "load.steps=3", 'contact.0.sliding="small"'])
+    out, summaries = _on_all_and_one_rank(comm, mpi_tmp, scene)
+    assert all_close(comm, np.allclose(out[0], out[1], rtol=1e-8, atol=1e-14))
+    assert all(step["snes_iterations"] == 1 for s in summaries for step in s["steps"][1:])
 
 
 @pytest.mark.parametrize("change, message", [
