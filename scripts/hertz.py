@@ -4,11 +4,12 @@
 Runs configs/hertz_{coarse,medium,fine}.toml (quarter model, gmsh tets, non-matching contact meshes, MUMPS)
 with master_slave, two_pass and quasi_symmetric with nodal (node-to-segment) rows, and two_pass and
 quasi_symmetric with 3 x 3 Gauss points per face and with exact segment integration (the scenes'
-default), the sphere or the block as slave; and configs/hertz_xfine.toml (half fine's element sizes,
-206k dofs, the iterative default solver) with the segment rows of two_pass and quasi_symmetric only
-(LEVEL_CASES). It compares the
-contact pressure and radius with Hertz's solution at the force each run measured: F = 4 x the pair's
-total_normal_force (quarter model), E* from both bodies, a = (3 F R / 4 E*)^(1/3), p0 = 3 F / (2 pi a^2).
+default), the sphere or the block as slave; the segment rows with the default finite sliding (a new search
+at each load step) and with small sliding (one search, in the undeformed configuration); and
+configs/hertz_xfine.toml (half fine's element sizes, 206k dofs, the iterative default solver) with the
+segment rows of two_pass and quasi_symmetric only (LEVEL_CASES). It compares the contact pressure and
+radius with Hertz's solution at the force each run measured: F = 4 x the pair's total_normal_force (quarter
+model), E* from both bodies, a = (3 F R / 4 E*)^(1/3), p0 = 3 F / (2 pi a^2).
 On each contact surface (sphere, block), from the last step's nodal contact_traction:
   * max t: the largest nodal traction (the raw peak);
   * fit p(0): c0 of a least-squares fit t = c0 + c2 r^2 over the nodes with r < a/2 (the peak with
@@ -24,12 +25,15 @@ Writes docs/hertz.csv, docs/hertz.png (traction against radius, finest level) an
 docs/verification.md. Runs go to build/hertz/; with --reuse the finished ones there are read, not solved again.
 Usage:
   .venv/bin/python scripts/hertz.py [--levels coarse medium fine xfine] [--ranks 1 1 2 2] [--reuse]
-(about 60 minutes for coarse to fine, 25 more for xfine, on 2 cores)
+(the runs' phases sum to about 14 minutes for coarse to fine and 21 for xfine on 2 cores, session 8; start-up adds a few)
   .venv/bin/python scripts/hertz.py --elastic-probe [--levels ...]   (no contact, serial, seconds; writes nothing)
+  .venv/bin/python scripts/hertz.py --variants contact.0.penalty=1e3 --levels fine --ranks 2   (writes nothing)
 The elastic probe asks whether the symmetry-plane band of the nodal traction needs contact at all: each part alone,
 Hertz's own surface displacement prescribed on its contact nodes within r < a (normal component only, the tangential
 ones free: a frictionless punch of Hertz's shape, whose pressure is Hertz's p(r) up to the parts' finite size), the
 nodal reaction over the tributary area read like the contact traction (hertz.traction_scatter).
+The variant probe reruns the segment cases with one more scene override each (another penalty: is the finer surface's
+scatter the penalty's? contact.0.sliding="small": what does searching once cost in accuracy?).
 """
 
 import argparse
@@ -53,13 +57,16 @@ from qsc_petsc.scene import load_scene
 
 LEVELS = ("coarse", "medium", "fine", "xfine")
 FORMULATIONS = ("master_slave", "two_pass", "quasi_symmetric")
-# (formulation, integration): every formulation with node-to-segment rows, and the two symmetric ones
-# with 3 x 3 Gauss points per face and with exact segment integration (formulation.md section 8)
-CASES = ([(f, "nodal") for f in FORMULATIONS] + [("two_pass", "gauss"), ("quasi_symmetric", "gauss")]
-         + [("two_pass", "segment"), ("quasi_symmetric", "segment")])
+# (formulation, integration, sliding): every formulation with node-to-segment rows, and the two symmetric
+# ones with 3 x 3 Gauss points per face and with exact segment integration (formulation.md section 8), with
+# the default finite sliding (a new search at each load step); the segment rows also with small sliding
+# (one search in the undeformed configuration: the linearised gap of Hertz's theory)
+SEGMENT_CASES = [(f, "segment", sliding) for sliding in ("finite", "small") for f in ("two_pass", "quasi_symmetric")]
+CASES = ([(f, "nodal", "finite") for f in FORMULATIONS]
+         + [("two_pass", "gauss", "finite"), ("quasi_symmetric", "gauss", "finite")] + SEGMENT_CASES)
 # The finest level runs only the question of issue 4's target (the two symmetric formulations with the
 # default segment rows, both slave choices): its 206k dofs take minutes per run even with the iterative solver.
-LEVEL_CASES = {"xfine": [("two_pass", "segment"), ("quasi_symmetric", "segment")]}
+LEVEL_CASES = {"xfine": SEGMENT_CASES}
 # With Gauss points or segments the active set changes by few points per Newton step. Before session 6
 # (every row within reach closed at an increment's start) the fine two_pass run with Gauss points needed
 # 33 + 24 iterations, close to the default 60 per load step, and xfine two_pass's second increment did not
@@ -73,7 +80,7 @@ SURFACES = ("sphere", "block")
 RUNS = ROOT / "build" / "hertz"
 SCATTER = ("edge_mean", "row_mean", "interior_mean", "interior_std", "interior_max", "origin", "interior_peak",
            "exact_error")   # hertz.traction_scatter
-COLUMNS = ["level", "block_level", "formulation", "integration", "slave", "dofs", "newton", "wall_s", "solver",
+COLUMNS = ["level", "block_level", "formulation", "integration", "sliding", "slave", "dofs", "newton", "wall_s", "solver",
            "memory_mib", "force", "a_hertz",
            "p0_hertz"] + [f"{m}_{s}" for s in SURFACES for m in ("max_t", "fit_p0", "a", "h", *SCATTER)]
 # Where the finer surface's scatter comes from: the fine sphere on the medium block and the medium sphere on
@@ -81,25 +88,32 @@ COLUMNS = ["level", "block_level", "formulation", "integration", "slave", "dofs"
 PROBES = [("fine", "medium"), ("medium", "fine")]
 
 
-def overrides(level, formulation, integration, slave, block_level=None):
-    """Scene overrides of a case; block_level meshes the block at another level than the scene's."""
+def overrides(level, formulation, integration, slave, block_level=None, variant=None, sliding="finite"):
+    """Scene overrides of a case; block_level meshes the block at another level than the scene's, variant is
+    one more override (key=value) of the variant probe."""
     s, m = SLAVES[slave]
     cap = QUADRATURE_ITERATIONS.get(level, QUADRATURE_ITERATIONS_DEFAULT)
     extra = [f"solver.max_active_set_iterations={cap}"] if integration != "nodal" else []
     extra += [f"bodies.1.mesh.level={block_level}"] if block_level else []
+    extra += [variant] if variant else []
+    extra += [f'contact.0.sliding="{sliding}"'] if sliding != "finite" else []
     return [f"contact.0.formulation={formulation}", f"contact.0.integration={integration}",
             f"contact.0.slave={s}", f"contact.0.master={m}", *extra]
 
 
-def case_dir(level, formulation, integration, slave, block_level=None):
+def case_dir(level, formulation, integration, slave, block_level=None, variant=None, sliding="finite"):
     mixed = f"_block-{block_level}" if block_level and block_level != level else ""
-    return RUNS / f"{level}{mixed}_{formulation}_{integration}_{slave}"
+    small = "_small" if sliding != "finite" else ""
+    name = f"{level}{mixed}_{formulation}_{integration}{small}_{slave}"
+    return RUNS / "variants" / f"{name}_{variant.replace(chr(34), '')}" if variant else RUNS / name
 
 
-def run_case(level, formulation, integration, slave, ranks, petsc=(), block_level=None):
+def run_case(level, formulation, integration, slave, ranks, petsc=(), block_level=None, variant=None,
+             sliding="finite"):
     """One qsc run under mpirun; returns its output folder."""
-    out = case_dir(level, formulation, integration, slave, block_level)
-    sets = [a for o in overrides(level, formulation, integration, slave, block_level) for a in ("--set", o)]
+    out = case_dir(level, formulation, integration, slave, block_level, variant, sliding)
+    sets = [a for o in overrides(level, formulation, integration, slave, block_level, variant, sliding)
+            for a in ("--set", o)]
     cmd = ["mpirun", "--oversubscribe", "-n", str(ranks), str(QSC), "run", str(ROOT / "configs" / f"hertz_{level}.toml"),
            "--out", str(out), *sets, *petsc]
     proc = subprocess.run(cmd, env=ENV, cwd=ROOT, capture_output=True, text=True, check=False)
@@ -143,9 +157,10 @@ def measure(scene, points, traction, total_normal_force):
     return row, profiles
 
 
-def analyse(level, formulation, integration, slave, out, block_level=None):
+def analyse(level, formulation, integration, slave, out, block_level=None, variant=None, sliding="finite"):
     import h5py
-    scene = load_scene(ROOT / "configs" / f"hertz_{level}.toml", overrides(level, formulation, integration, slave, block_level))
+    scene = load_scene(ROOT / "configs" / f"hertz_{level}.toml",
+                       overrides(level, formulation, integration, slave, block_level, variant, sliding))
     summary = json.loads((out / "summary.json").read_text())
     if summary["status"] != "ok":
         raise RuntimeError(f"{out}: status {summary['status']}")
@@ -154,7 +169,8 @@ def analyse(level, formulation, integration, slave, out, block_level=None):
         points = h5["mesh/geometry"][:]
         traction = h5[f"step_{len(summary['steps']):04d}/contact_traction"][:, 0]
     row, profiles = measure(scene, points, traction, pair["total_normal_force"])
-    row.update({"level": level, "block_level": block_level or level, "formulation": formulation, "integration": integration, "slave": slave,
+    row.update({"level": level, "block_level": block_level or level, "formulation": formulation,
+                "integration": integration, "sliding": sliding, "slave": slave,
                 "dofs": summary["mesh"]["dofs"],
                 "newton": sum(s["snes_iterations"] for s in summary["steps"]),
                 "wall_s": sum(summary["time"].values()),
@@ -172,16 +188,17 @@ def plot(rows, profiles, level, path):
     fig, axes = plt.subplots(2, len(cases), figsize=(4 * len(cases), 7), sharex=True, sharey=True, squeeze=False)
     x = np.linspace(0, 1.3, 400)
     for i, slave in enumerate(SLAVES):
-        for j, (formulation, integration) in enumerate(cases):
+        for j, (formulation, integration, sliding) in enumerate(cases):
             ax = axes[i, j]
-            key = (level, formulation, integration, slave)
-            row = next(r for r in rows if (r["level"], r["formulation"], r["integration"], r["slave"]) == key)
+            key = (level, formulation, integration, sliding, slave)
+            row = next(r for r in rows
+                       if (r["level"], r["formulation"], r["integration"], r["sliding"], r["slave"]) == key)
             a, p0 = row["a_hertz"], row["p0_hertz"]
             for surface, marker in zip(SURFACES, ("o", "^")):
                 r, t = profiles[key][surface]
                 ax.plot(r / a, t / p0, marker, ms=2.5, alpha=0.6, label=f"{surface} nodes")
             ax.plot(x, hertz.pressure(x, 1.0, 1.0), "k-", lw=1.5, label="Hertz")
-            ax.set_title(f"{formulation} ({integration}), {slave} slave", fontsize=10)
+            ax.set_title(f"{formulation} ({integration}, {sliding} sliding)\n{slave} slave", fontsize=10)
             ax.grid(alpha=0.3)
             if i == 1:
                 ax.set_xlabel("r / a (Hertz, measured force)")
@@ -249,6 +266,29 @@ def elastic_probe(level, a=0.1, p0=1.0):
     return out
 
 
+def variant_probe(levels, ranks, variants, petsc, reuse):
+    """The variant probe of the module docstring: one line per (level, segment case, slave, variant)."""
+    print("level formulation slave variant: Newton, time [s]; F [N]; max t / p0, off-plane std and max of t / p, "
+          "fit p(0) / p0, a / a_H (sphere / block)")
+    for level, n in zip(levels, ranks):
+        cases = [c[:2] for c in LEVEL_CASES.get(level, CASES) if c[1:] == ("segment", "finite")]
+        for (formulation, integration), slave, variant in ((c, s, v) for c in cases for s in SLAVES for v in variants):
+            out = case_dir(level, formulation, integration, slave, variant=variant)
+            done = out / "summary.json"
+            if not (reuse and done.is_file() and json.loads(done.read_text())["status"] == "ok"):
+                run_case(level, formulation, integration, slave, n, petsc, variant=variant)
+            r, _ = analyse(level, formulation, integration, slave, out, variant=variant)
+            p0 = r["p0_hertz"]
+            print(f"{level} {formulation} {slave} {variant}: {r['newton']}, {r['wall_s']:.1f}; {r['force']:.4f}; "
+                  f"{pair_text(r, 'max_t', p0)}, {pair_text(r, 'interior_std')}, {pair_text(r, 'interior_max')}, "
+                  f"{pair_text(r, 'fit_p0', p0)}, {pair_text(r, 'a', r['a_hertz'])}", flush=True)
+
+
+def pair_text(row, key, scale=1.0):
+    """'sphere / block' of one measure."""
+    return " / ".join(f"{row[f'{key}_{s}'] / scale:.4f}" for s in SURFACES)
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--levels", nargs="+", default=list(LEVELS), choices=LEVELS)
@@ -260,8 +300,14 @@ def main():
     ap.add_argument("--elastic-probe", action="store_true",
                     help="no contact: print the symmetry-plane band of each part under Hertz's prescribed surface "
                          "displacement (see above) for --levels, and stop")
+    ap.add_argument("--variants", nargs="+", metavar="KEY=VALUE",
+                    help="rerun the segment cases of --levels with each of these scene overrides (runs in "
+                         "build/hertz/variants/), print both surfaces' measures, write nothing, and stop")
     add_docs_args(ap, "Hertz contact")
     args = ap.parse_args()
+    if args.variants:
+        variant_probe(args.levels, args.ranks, args.variants, args.petsc.split(), args.reuse)
+        return
     if args.elastic_probe:
         print("level part: t / p on plane nodes, next row, off-plane (mean +- std) within r < a/2")
         for level in args.levels:
@@ -273,15 +319,16 @@ def main():
         ap.error("--ranks needs one count per level")
     rows, profiles = [], {}
 
-    def case(level, formulation, integration, slave, ranks, block_level=None):
+    def case(level, formulation, integration, sliding, slave, ranks, block_level=None):
         t0 = time.perf_counter()
-        out = case_dir(level, formulation, integration, slave, block_level)
+        out = case_dir(level, formulation, integration, slave, block_level, sliding=sliding)
         done = out / "summary.json"
         if not (args.reuse and done.is_file() and json.loads(done.read_text())["status"] == "ok"):
-            out = run_case(level, formulation, integration, slave, ranks, args.petsc.split(), block_level)
-        row, prof = analyse(level, formulation, integration, slave, out, block_level)
+            out = run_case(level, formulation, integration, slave, ranks, args.petsc.split(), block_level,
+                           sliding=sliding)
+        row, prof = analyse(level, formulation, integration, slave, out, block_level, sliding=sliding)
         row["ranks"] = ranks
-        print(f"{level} (block {row['block_level']}) {formulation} {integration} {slave}: max t/p0 "
+        print(f"{level} (block {row['block_level']}) {formulation} {integration} {sliding} {slave}: max t/p0 "
               f"{row['max_t_sphere'] / row['p0_hertz']:.3f} / {row['max_t_block'] / row['p0_hertz']:.3f}, fit "
               f"{row['fit_p0_sphere'] / row['p0_hertz']:.3f} / {row['fit_p0_block'] / row['p0_hertz']:.3f}, a/a_H "
               f"{row['a_sphere'] / row['a_hertz']:.3f} / {row['a_block'] / row['a_hertz']:.3f} "
@@ -289,17 +336,17 @@ def main():
         return row, prof
 
     for level, ranks in zip(args.levels, args.ranks):
-        for formulation, integration in LEVEL_CASES.get(level, CASES):
+        for formulation, integration, sliding in LEVEL_CASES.get(level, CASES):
             for slave in SLAVES:
-                row, prof = case(level, formulation, integration, slave, ranks)
+                row, prof = case(level, formulation, integration, sliding, slave, ranks)
                 rows.append(row)
-                profiles[(level, formulation, integration, slave)] = prof
+                profiles[(level, formulation, integration, sliding, slave)] = prof
     probes = []
     if args.probes:
         for sphere_level, block_level in PROBES:
             ranks = max(r for lv, r in zip(args.levels, args.ranks) if lv in (sphere_level, block_level)) \
                 if {sphere_level, block_level} & set(args.levels) else 2
-            probes.append(case(sphere_level, "two_pass", "segment", "sphere", ranks, block_level)[0])
+            probes.append(case(sphere_level, "two_pass", "segment", "finite", "sphere", ranks, block_level)[0])
     docs = ROOT / "docs"
     with open(docs / "hertz.csv", "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=COLUMNS + ["ranks"])
@@ -313,19 +360,21 @@ def main():
     table = []
     for r in rows:
         table.append("| " + " | ".join([
-            r["level"], r["formulation"], r["integration"], r["slave"], str(r["dofs"]), f"{r['force']:.4f}", f"{r['a_hertz']:.4f}",
+            r["level"], r["formulation"], r["integration"], r["sliding"], r["slave"], str(r["dofs"]), f"{r['force']:.4f}", f"{r['a_hertz']:.4f}",
             f"{r['p0_hertz']:.2f}", pair(r, "max_t", lambda r, s: r["p0_hertz"]),
             pair(r, "fit_p0", lambda r, s: r["p0_hertz"]), pair(r, "a", lambda r, s: r["a_hertz"]),
             " / ".join(f"{(r[f'a_{s}'] - r['a_hertz']) / r[f'h_{s}']:+.2f}" for s in SURFACES),
             pair(r, "h", lambda r, s: r["a_hertz"], "{:.3f}"), str(r["newton"]), f"{r['wall_s']:.1f}",
             r["solver"], f"{r['memory_mib']:.0f}"]) + " |")
-    headers = ["level", "formulation", "integration", "slave", "dofs", "F [N]", "a_H [m]", "p0_H [Pa]", "max t / p0",
+    headers = ["level", "formulation", "integration", "sliding", "slave", "dofs", "F [N]", "a_H [m]", "p0_H [Pa]", "max t / p0",
                "fit p(0) / p0", "a / a_H", "(a - a_H) / h", "h / a_H", "Newton", "time [s]", "solver",
                "memory [MiB]"]
     description = ("sphere R = 1 m, E = 2000 Pa, on a block E = 1000 Pa, nu = 0.3, quarter model, alpha = 1e4; "
                    "levels " + ", ".join(f"{lv} on {n} rank{'s' * (n > 1)}" for lv, n in zip(args.levels, args.ranks))
                    + "; solver: MUMPS (the scene's [petsc] table) or the iterative default (hertz_xfine has "
-                   "no table); xfine runs the segment rows of two_pass and quasi_symmetric only; time = the "
+                   "no table); xfine runs the segment rows of two_pass and quasi_symmetric only; sliding: finite = a new "
+                   "search at each load step (the default), small = one search in the undeformed configuration; "
+                   "time = the "
                    "run's phases summed, memory = peak resident memory summed over ranks. Hertz "
                    "values a_H, p0_H at the measured force F (4 x the quarter's); each pair of numbers is "
                    "sphere surface / block surface; see scripts/hertz.py for the measures. CSV: docs/hertz.csv; "
@@ -335,12 +384,12 @@ def main():
     scatter = []
     for r in [r for r in rows if r["integration"] == "segment"] + probes:
         scatter.append("| " + " | ".join([
-            r["level"], r["block_level"], r["formulation"], r["slave"],
+            r["level"], r["block_level"], r["formulation"], r["sliding"], r["slave"],
             pair(r, "h", lambda r, s: r["a_hertz"]), pair(r, "max_t", lambda r, s: r["p0_hertz"]),
             *(pair(r, k) for k in ("edge_mean", "row_mean", "interior_mean", "interior_std", "interior_max")),
             pair(r, "interior_peak"),
             pair(r, "exact_error", fmt="{:.1e}")]) + " |")
-    headers = ["sphere level", "block level", "formulation", "slave", "h / a_H", "max t / p0",
+    headers = ["sphere level", "block level", "formulation", "sliding", "slave", "h / a_H", "max t / p0",
                "plane nodes: mean t / p", "next row: mean t / p", "off-plane: mean t / p", "off-plane: std",
                "off-plane: max t / p", "off-plane: max t / p0", "measure on exact p: max error"]
     description = ("segment integration; the same runs as the table above plus two mixed-level runs (two_pass, "

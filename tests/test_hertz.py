@@ -115,18 +115,20 @@ def test_traction_scatter_keeps_the_origin_out_of_the_plane_nodes(cache):
     assert stats["interior_peak"] < 1.0
 
 
-@pytest.mark.parametrize("integration", ["nodal", "segment"])
-@pytest.mark.parametrize("formulation", ["two_pass", "quasi_symmetric"])
-def test_coarse_hertz_peak_pressure_and_contact_radius(cache, tmp_path, formulation, integration):
+@pytest.mark.parametrize("formulation, integration, sliding", [
+    (f, i, "finite") for f in ("two_pass", "quasi_symmetric") for i in ("nodal", "segment")] + [
+    (f, "segment", "small") for f in ("two_pass", "quasi_symmetric")])
+def test_coarse_hertz_peak_pressure_and_contact_radius(cache, tmp_path, formulation, integration, sliding):
     """configs/hertz_coarse.toml (sphere slave, a/h = 4.9 on the sphere) shall give, on both contact surfaces, a
     peak nodal traction within 15 % of Hertz's p0 and a contact radius within one element size of Hertz's a,
     both at the measured force; with segment integration the coarser (block) surface's peak shall be within
     3 %. Measured: peak 1.073 / 1.074 p0 (sphere / block surface, two_pass nodal), 1.083 / 1.026
-    (quasi_symmetric nodal), 1.135 / 0.998 (two_pass segment), 1.137 / 0.992 (quasi_symmetric segment);
-    radius within 0.67 element sizes."""
+    (quasi_symmetric nodal), 1.135 / 0.998 (two_pass segment), 1.137 / 0.992 (quasi_symmetric segment),
+    1.114 / 0.999 and 1.134 / 0.991 with small sliding; radius within 0.67 element sizes."""
     from qsc_petsc.run import Run
     scene = load_scene(CONFIGS / "hertz_coarse.toml", [f"contact.0.formulation={formulation}", "output.xdmf=false",
                                                         f"contact.0.integration={integration}",
+                                                        f'contact.0.sliding="{sliding}"',
                                                         f"bodies.0.mesh.cache={cache}", f"bodies.1.mesh.cache={cache}"])
     run = Run(scene, MPI.COMM_SELF, tmp_path, log=lambda *a, **k: None)
     try:
@@ -178,7 +180,7 @@ def test_levels_form_one_refinement_series_and_xfine_runs_iteratively():
     ratio (1 / 1.4, never matching), so that xfine (h = a / 32 on the sphere) continues the coarse-medium-fine series;
     its generator parameters shall hash to their own cache file; configs/hertz_xfine.toml shall be hertz_fine at
     level xfine without a [petsc] table (the iterative default, no MUMPS), and scripts/hertz.py shall run only the
-    symmetric formulations' segment rows there."""
+    symmetric formulations' segment rows there, with finite and with small sliding."""
     assert hertz.LEVELS == ("coarse", "medium", "fine", "xfine")
     for coarser, finer in zip(hertz.LEVELS, hertz.LEVELS[1:]):
         assert np.allclose(np.divide(hertz.SIZES[coarser], hertz.SIZES[finer]), 2.0), (coarser, finer)
@@ -202,4 +204,8 @@ def test_levels_form_one_refinement_series_and_xfine_runs_iteratively():
     sys.path.insert(0, str(ROOT / "scripts"))
     import hertz as script
     assert script.LEVELS == hertz.LEVELS
-    assert script.LEVEL_CASES["xfine"] == [("two_pass", "segment"), ("quasi_symmetric", "segment")]
+    assert sorted(script.LEVEL_CASES["xfine"]) == sorted((f, "segment", sliding) for f in ("two_pass", "quasi_symmetric")
+                                                         for sliding in ("finite", "small"))
+    assert script.overrides("xfine", "two_pass", "segment", "sphere", sliding="small")[-1] == 'contact.0.sliding="small"'
+    assert script.case_dir("xfine", "two_pass", "segment", "sphere", sliding="small").name == \
+        "xfine_two_pass_segment_small_sphere"
