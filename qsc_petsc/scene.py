@@ -469,12 +469,13 @@ CONTACT = Table({
                                  gt=0, default=1e-6),
     "augmented_max_iterations": Int("Most augmented Lagrangian updates per load step.", ge=1, default=25),
     "search_distance": Float("Largest gap that still makes a contact row, in units of the pair's element size.",
-                             gt=0, default=1.0, unit="h_eff"),    "sliding": Choice(("finite", "small"),
+                             gt=0, default=1.0, unit="h_eff"),
+    "sliding": Choice(("finite", "small"),
                       "\"finite\": a new search in the deformed configuration at every load step, so that the rows "
                       "follow the sliding; \"small\": one search, in the undeformed configuration, whose rows "
                       "are kept for the whole run (the gap linear in the displacement, for sliding well below an "
-                      "element size, as in small-strain problems): no search after the first, and a linear "
-                      "problem's later increments take one Newton step.", default="finite"),
+                      "element size, as in small-strain problems): no search after the first, and an increment whose "
+                      "active set holds takes one Newton step.", default="finite"),
 })
 
 DIE = Table({
