@@ -474,8 +474,8 @@ CONTACT = Table({
                       "\"finite\": a new search in the deformed configuration at every load step, so that the rows "
                       "follow the sliding; \"small\": one search, in the undeformed configuration, whose rows "
                       "are kept for the whole run (the gap linear in the displacement, for sliding well below an "
-                      "element size, as in small-strain problems): no search after the first, and an increment whose "
-                      "active set holds takes one Newton step.", default="finite"),
+                      "element size, as in small-strain problems): no search after the first, and a later increment "
+                      "whose active set holds starts on its answer (the extrapolating predictor).", default="finite"),
 })
 
 DIE = Table({
