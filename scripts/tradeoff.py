@@ -15,7 +15,7 @@ compared with a reference run by qsc_petsc/compare.py); sweeps go to results/tra
     LU. Sweeps per level (the two cell counts move together) share one reference run, matching
     24 x 24 x 48 cells on both bodies, solved once; its own error is estimated from the matching 12
     and 16 runs (two more sweeps against it).
-  * hertz: configs/hertz_{coarse,medium}.toml, formulation x integration; reference: Hertz's
+  * hertz: configs/hertz_{coarse,medium}.toml, formulation x integration x sliding; reference: Hertz's
     analytical peak pressure and contact radius at each run's measured force (scripts/hertz.py's
     measures). The sweep's own error columns there compare with its first run and are not used.
 Writes the tables into docs/tradeoff.md (sections replaced, the rest of the file kept) and
@@ -53,6 +53,7 @@ CUBE_REFERENCE = 24                  # matching m x m x 2m cells on both bodies
 CUBE_CHECKS = (12, 16)               # matching runs that measure the reference's own error
 SOLVERS = {"lu": "MUMPS LU", "gamg": "CG + GAMG"}
 HERTZ_LEVELS = ("coarse", "medium")
+SLIDINGS = ("finite", "small")       # a new search every load step, or one in the undeformed configuration
 # Gauss and segment points change the active set by a few points per Newton step (scripts/hertz.py)
 HERTZ_ITERATIONS = 80
 
@@ -511,6 +512,7 @@ def hertz(args):
     for level in HERTZ_LEVELS:
         argv = [f"configs/hertz_{level}.toml", "--vary", f"contact.0.formulation={','.join(FORMULATIONS)}",
                 "--vary", f"contact.0.integration={','.join(integrations())}",
+                "--vary", f"contact.0.sliding={','.join(SLIDINGS)}",
                 "--set", f"solver.max_active_set_iterations={HERTZ_ITERATIONS}"]
         _, level_rows = sweep(f"hertz_{level}", argv, args.no_run)
         rows += [dict(r, level=level) for r in runs(level_rows)]
@@ -522,7 +524,8 @@ def hertz(args):
         points, _ = pair_stats(r)
         p0, a = m["p0_hertz"], m["a_hertz"]
         table.append("| " + " | ".join([
-            r["level"], r["contact.0.formulation"], r["contact.0.integration"], r["dofs"], r["newton_iterations"],
+            r["level"], r["contact.0.formulation"], r["contact.0.integration"], r["contact.0.sliding"], r["dofs"],
+            r["newton_iterations"],
             str(points), fmt(r["run_time_s"], ".2f"), f"{m['force']:.4f}",
             f"{m['fit_p0_sphere'] / p0 - 1:+.3f} / {m['fit_p0_block'] / p0 - 1:+.3f}",
             f"{m['max_t_sphere'] / p0 - 1:+.3f} / {m['max_t_block'] / p0 - 1:+.3f}",
@@ -532,16 +535,17 @@ def hertz(args):
         f"configs/hertz_{{coarse,medium}}.toml (quarter sphere R = 1 m, E = 2000 Pa, on a block, E = 1000 Pa, "
         f"nu = 0.3; sphere = slave; gmsh tets, non-matching contact meshes; alpha 1e4, MUMPS, 1 rank); sweeps "
         f"`qsc sweep configs/hertz_<level>.toml --vary contact.0.formulation={','.join(FORMULATIONS)} --vary "
-        f"contact.0.integration={','.join(integrations())} --set solver.max_active_set_iterations="
-        f"{HERTZ_ITERATIONS}` (results/tradeoff/hertz_*); gauss: 3 x 3 points per face (collapsed on the "
-        f"triangles). Against Hertz at each run's measured force F "
+        f"contact.0.integration={','.join(integrations())} --vary contact.0.sliding={','.join(SLIDINGS)} --set "
+        f"solver.max_active_set_iterations={HERTZ_ITERATIONS}` (results/tradeoff/hertz_*); gauss: 3 x 3 points "
+        f"per face (collapsed on the triangles); sliding: finite = a new search at each of the 2 load steps, "
+        f"small = one search in the undeformed configuration. Against Hertz at each run's measured force F "
         f"(4 x the quarter's): p(0): the centre traction from a fit t = c0 + c2 r^2 over r < a_H/2, relative "
         f"to p0_H; max t: the largest nodal traction relative to p0_H; a: the radius where the nodal traction "
         f"drops to zero (qsc_petsc.hertz.loaded_radius) relative to a_H -- it moves in steps of the node "
         f"spacing, h/a_H the mean face size there. Each pair: sphere surface / block surface (scripts/hertz.py's "
         f"measures). {timing_note(args, f'{len(rows)} runs', before, elapsed)}{not_ok_note()}")
     write_table(DOC, "Hertz", "tradeoff.py", description,
-                ["level", "formulation", "integration", "dofs", "Newton", "quad points", "run s", "F [N]",
+                ["level", "formulation", "integration", "sliding", "dofs", "Newton", "quad points", "run s", "F [N]",
                  "p(0) err", "max t err", "a err", "h/a_H"], table)
 
 
