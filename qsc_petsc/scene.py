@@ -475,7 +475,8 @@ CONTACT = Table({
                       "follow the sliding; \"small\": one search, in the undeformed configuration, whose rows "
                       "are kept for the whole run (the gap linear in the displacement, for sliding well below an "
                       "element size, as in small-strain problems): no search after the first, and a later increment "
-                      "whose active set holds starts on its answer (the extrapolating predictor).", default="finite"),
+                      "whose active set holds starts on its answer (the extrapolating predictor); only points "
+                      "within search_distance at the start can ever touch.", default="finite"),
 })
 
 DIE = Table({
