@@ -246,6 +246,8 @@ class Run:
                     if self.contact is not None:
                         cpoint, record["contact"] = self.contact.report(u, ul)
                         point.update(cpoint)
+                        for line in self.contact.slip_warnings(record["contact"]):
+                            self.log(f"step {step}: warning: {line}")
                     self.writer.write_step(step, t, point, cell)
                     self.summary["steps"].append(record)
                     self.write_summary()

@@ -82,3 +82,43 @@ def test_sliding_is_validated_and_shown_by_check(tmp_path):
     path.write_text(bench_contact.scene(2, "quasi_symmetric+small"))
     spec = load_scene(path).contact[0]
     assert (spec.formulation, spec.sliding) == ("quasi_symmetric", "small")
+
+
+def _run_logged(tmp_path, overrides):
+    """Run two_cubes_dies (MUMPS) with overrides; returns the summary and the lines the run logged."""
+    from mpi4py import MPI
+
+    from qsc_petsc.run import Run
+    lines = []
+    run = Run(load_scene(CONFIGS / "two_cubes_dies.toml", overrides), MPI.COMM_WORLD, tmp_path,
+              log=lambda *a, **k: lines.append(a[0]))
+    try:
+        return run.execute(), lines
+    finally:
+        run.destroy()
+
+
+def test_slip_is_measured_and_small_sliding_out_of_range_is_named(tmp_path):
+    """The top (sticking) die also moves 0.3 m sideways: the upper cube slides over the lower one on the
+    frictionless interface. Each step's pair summary gives how far the pressed nodes slid (max_slip_*: the
+    opposite material point faced now against the one faced at u = 0), about the die's sideways travel; small
+    sliding keeps the undeformed rows regardless (a different answer: the overhanging slave nodes stay
+    pressed), and the run says so once, at the first step whose slip exceeds SLIP_WARNING h_eff (0.15 m =
+    0.6 h_eff at step 2). Without the sideways motion the slip stays far below an element and nothing is said."""
+    slide = SMALL[:2] + ["load.steps=4", "die.1.motion=[0.3,0,-0.02]"]
+    finite, finite_log = _run_logged(tmp_path / "finite", slide)
+    small, small_log = _run_logged(tmp_path / "small", slide + ['contact.0.sliding="small"'])
+    pairs = [[next(iter(s["contact"].values())) for s in r["steps"]] for r in (finite, small)]
+    for run_pairs in pairs:
+        for step, pair in enumerate(run_pairs, start=1):
+            for side in ("slave", "master"):
+                assert pair[f"max_slip_{side}"] == pytest.approx(0.075 * step, rel=0.05)
+    assert not [line for line in finite_log if "warning" in line]
+    warned = [line for line in small_log if "warning" in line]
+    assert len(warned) == 1 and warned[0].startswith("step 2: warning: contact[0]: the contact slid")
+    assert 'sliding = "finite"' in warned[0]
+    assert pairs[0][-1]["active_rows"] < pairs[1][-1]["active_rows"]       # finite sliding lets the overhang go
+    flat, flat_log = _run_logged(tmp_path / "flat", SMALL + ['contact.0.sliding="small"'])
+    pair = next(iter(flat["steps"][-1]["contact"].values()))
+    assert max(pair["max_slip_slave"], pair["max_slip_master"]) < 0.01 * pair["h_eff"]
+    assert not [line for line in flat_log if "warning" in line]

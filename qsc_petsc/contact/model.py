@@ -131,7 +131,11 @@ def _search_pass(mesh, T, X, U, radius, points):
     """Points (a quadrature.gauss_points-like dict) projected on T's faces: a rows.Pass, the found mask and dict."""
     gv, key, fx, fu, fsize = _target_faces(mesh, T, X, U, points["x_cur"], radius)
     found = closest_faces(points["x_cur"], fx + fu, mesh.face_type, key, radius)
-    return quadrature.found_pass(points, found, gv, fx, fsize), found["face"] >= 0, found
+    ok = found["face"] >= 0
+    # the T material point each point faces, in the reference configuration (ContactModel.report's slip)
+    found["target_ref"] = np.zeros((len(ok), 3))
+    found["target_ref"][ok] = np.einsum("pv,pvi->pi", found["shape"][ok], fx[found["face"][ok]])
+    return quadrature.found_pass(points, found, gv, fx, fsize), ok, found
 
 
 def project_pass(mesh, S, T, X, U, radius):
@@ -195,6 +199,11 @@ def die_data(mesh, scene, template):
     return dies
 
 
+# sliding = "small" is said to be out of its range once a touching node faces an opposite material point
+# this many h_eff from the one it faced at u = 0 (ContactModel.slip_warnings)
+SLIP_WARNING = 0.5
+
+
 class ContactModel:
     """Builds the constraint terms of every contact pair and die at each search, and reports on them."""
 
@@ -206,6 +215,8 @@ class ContactModel:
         self.dies = die_data(mesh, scene, template)
         self.current = []
         self.fixed = set()         # the terms of small-sliding pairs, searched once (terms)
+        self.faced_at_start = {}   # (pair, side): the opposite material point each node faced at u = 0 (report)
+        self.slip_warned = set()
         self.t = 0.0
 
     def _phase(self, name):
@@ -338,6 +349,7 @@ class ContactModel:
                 v = S.nodes[ok]
                 h = -found["signed_gap"][ok]          # penetration in the current configuration
                 p_own = np.einsum("pi,pi->p", F[_owned_rows(mesh, S.nodes)], S.normal) / S.area
+                entry[f"max_slip_{side}"] = self._max_slip(pd, side, S, T, ok & (p_own > 0), found)
                 traction[S.nodes, 0] = p_own
                 penetration[v, 0] = h
                 st = np.zeros(len(v))
@@ -376,6 +388,34 @@ class ContactModel:
                                                     op=MPI.SUM)}
         fields = {"contact_traction": traction, "contact_penetration": penetration, "contact_status": status}
         return fields, summaries
+
+    def slip_warnings(self, summaries):
+        """One line per small-sliding pair whose contact slid farther than SLIP_WARNING x h_eff (report's
+        max_slip_*), the first time it does."""
+        lines = []
+        for pd, entry in zip(self.pairs, summaries.values()):
+            spec, name = pd["spec"], f"contact[{pd['index']}]"
+            slip = max(entry["max_slip_slave"], entry["max_slip_master"])
+            if spec.sliding == "small" and slip > SLIP_WARNING * pd["h_eff"] and name not in self.slip_warned:
+                self.slip_warned.add(name)
+                lines.append(f"{name}: the contact slid {slip:.3g} m = {slip / pd['h_eff']:.2g} h_eff, more than "
+                             f"{SLIP_WARNING} h_eff; sliding = \"small\" keeps the rows of the undeformed "
+                             f"configuration: use sliding = \"finite\" for this scene")
+        return lines
+
+    def _max_slip(self, pd, side, S, T, pressed, found):
+        """The largest distance, over S's pressed nodes (found on T now, with a positive contact traction), between
+        the T material point a node faces now and the one it faced at u = 0 (both in T's reference
+        configuration): how far the contact slid [m]; all ranks."""
+        key = (pd["index"], side)
+        if key not in self.faced_at_start:
+            _, ok0, found0 = project_pass(self.mesh, S, T, self.mesh.coords, np.zeros_like(self.mesh.coords),
+                                          pd["radius"])
+            self.faced_at_start[key] = (ok0, found0["target_ref"])
+        ok0, start = self.faced_at_start[key]
+        both = pressed & ok0
+        slip = np.linalg.norm(found["target_ref"][both] - start[both], axis=1)
+        return self.comm.allreduce(float(slip.max(initial=0.0)), op=MPI.MAX)
 
     def destroy(self):
         for term in self.current:

@@ -100,13 +100,19 @@ def test_rank_invariance_non_matching(comm, mpi_tmp, formulation):
 
 
 def test_small_sliding_rank_invariance(comm, mpi_tmp):
-    """Small sliding (rows of one search kept over 3 load steps, two cubes between dies, MUMPS): N ranks give
-    the serial summary to 1e-8 relative, and every increment after the first is one Newton step."""
+    """Small sliding (rows of one search kept over 3 load steps, two cubes between dies whose top one also moves
+    sideways, MUMPS): N ranks give the serial summary, the measured slip included, to 1e-8 relative, and every
+    increment after the first is one Newton step."""
     from qsc_petsc.scene import load_scene
     scene = load_scene(CONFIGS / "two_cubes_dies.toml", ["bodies.0.mesh.cells=[3,3,3]", "bodies.1.mesh.cells=[4,4,4]",
-                                                          "load.steps=3", 'contact.0.sliding="small"'])
+                                                          "load.steps=3", 'contact.0.sliding="small"',
+                                                          "die.1.motion=[0.1,0,-0.02]"])
     out, summaries = _on_all_and_one_rank(comm, mpi_tmp, scene)
     assert all_close(comm, np.allclose(out[0], out[1], rtol=1e-8, atol=1e-14))
+    slips = [[p[f"max_slip_{side}"] for st in s["steps"] for p in list(st["contact"].values())[:1]
+              for side in ("slave", "master")] for s in summaries]
+    assert min(slips[0]) > 0.01
+    assert all_close(comm, np.allclose(slips[0], slips[1], rtol=1e-8))
     assert all(step["snes_iterations"] == 1 for s in summaries for step in s["steps"][1:])
 
 
