@@ -118,6 +118,15 @@ def test_slip_is_measured_and_small_sliding_out_of_range_is_named(tmp_path):
     assert len(warned) == 1 and warned[0].startswith("step 2: warning: contact[0]: the contact slid")
     assert 'sliding = "finite"' in warned[0]
     assert pairs[0][-1]["active_rows"] < pairs[1][-1]["active_rows"]       # finite sliding lets the overhang go
+    # every node that carries contact force and faces the other body reads touching, also where the increment's
+    # sliding lifted it off the facets its rows were linearised on (finite sliding: gaps up to 5e-4 m here)
+    import h5py
+    with h5py.File(tmp_path / "finite" / "solution.h5", "r") as h5:
+        last = h5[f"step_{len(finite['steps']):04d}"]
+        status = last["contact_status"][:, 0]
+        pressed = (last["contact_traction"][:, 0] > 0) & (status >= 0)      # -1: past the other body's edge
+        assert pressed.sum() > 0 and np.all(status[pressed] == 1)
+        assert last["contact_penetration"][:, 0][pressed].min() < -1e-4
     flat, flat_log = _run_logged(tmp_path / "flat", SMALL + ['contact.0.sliding="small"'])
     pair = next(iter(flat["steps"][-1]["contact"].values()))
     assert max(pair["max_slip_slave"], pair["max_slip_master"]) < 0.01 * pair["h_eff"]

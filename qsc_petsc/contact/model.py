@@ -352,9 +352,10 @@ class ContactModel:
                 entry[f"max_slip_{side}"] = self._max_slip(pd, side, S, T, ok & (p_own > 0), found)
                 traction[S.nodes, 0] = p_own
                 penetration[v, 0] = h
-                st = np.zeros(len(v))
-                st[h >= -self.scene.solver.active_set_tolerance * pd["h_eff"]] = 1.0
-                status[v, 0] = st
+                # touching: penetrating, or carrying contact force (rows linearised at an increment's start can
+                # hold a node that the increment's sliding has since lifted off the opposite facets)
+                touching = (h >= -self.scene.solver.active_set_tolerance * pd["h_eff"]) | (p_own[ok] > 0)
+                status[v, 0] = touching.astype(float)
                 force = self.comm.allreduce(-F[_owned_rows(mesh, S.nodes)].sum(axis=0), op=MPI.SUM)
                 entry[f"max_penetration_{side}"] = self.comm.allreduce(float(h.max(initial=-np.inf)), op=MPI.MAX)
                 a = S.area[ok]
