@@ -199,7 +199,7 @@ def die_data(mesh, scene, template):
     return dies
 
 
-# sliding = "small" is said to be out of its range once a touching node faces an opposite material point
+# sliding = "small" is said to be out of its range once a pressed node faces an opposite material point
 # this many h_eff from the one it faced at u = 0 (ContactModel.slip_warnings)
 SLIP_WARNING = 0.5
 
