@@ -131,11 +131,9 @@ def _search_pass(mesh, T, X, U, radius, points):
     """Points (a quadrature.gauss_points-like dict) projected on T's faces: a rows.Pass, the found mask and dict."""
     gv, key, fx, fu, fsize = _target_faces(mesh, T, X, U, points["x_cur"], radius)
     found = closest_faces(points["x_cur"], fx + fu, mesh.face_type, key, radius)
-    ok = found["face"] >= 0
-    # the T material point each point faces, in the reference configuration (ContactModel.report's slip)
-    found["target_ref"] = np.zeros((len(ok), 3))
-    found["target_ref"][ok] = np.einsum("pv,pvi->pi", found["shape"][ok], fx[found["face"][ok]])
-    return quadrature.found_pass(points, found, gv, fx, fsize), ok, found
+    # the T material point each point faces, in the reference configuration (also ContactModel.report's slip)
+    found["target_ref"] = quadrature.faced_points(found, fx)
+    return quadrature.found_pass(points, found, gv, fx, fsize, found["target_ref"]), found["face"] >= 0, found
 
 
 def project_pass(mesh, S, T, X, U, radius):
@@ -214,7 +212,6 @@ class ContactModel:
         self.pairs = contact_pairs_data(mesh, scene, template)
         self.dies = die_data(mesh, scene, template)
         self.current = []
-        self.fixed = set()         # the terms of small-sliding pairs, searched once (terms)
         self.faced_at_start = {}   # (pair, side): the opposite material point each node faced at u = 0 (report)
         self.slip_warned = set()
         self.t = 0.0
@@ -241,7 +238,8 @@ class ContactModel:
         """New search at the current displacement u, load factor t: one ConstraintTerm per pair and die; a pair
         with small sliding keeps the term of its first search (its rows and, with the augmented Lagrangian,
         its multipliers)."""
-        kept = {term.name: term for term in self.current if term.name in self.fixed}
+        small = {f"contact[{pd['index']}]" for pd in self.pairs if pd["spec"].sliding == "small"}
+        kept = {term.name: term for term in self.current if term.name in small}
         for term in self.current:
             if term.name not in kept:
                 term.destroy()
@@ -279,8 +277,6 @@ class ContactModel:
                 term = self._term(name, rows, pd["eps_n"], pd["h_eff"], spec.enforcement == "augmented_lagrangian")
                 term.points = points
                 out.append(term)
-                if spec.sliding == "small":
-                    self.fixed.add(name)
         for dd in self.dies:
             spec = dd["spec"]
             with self._phase("rows"):

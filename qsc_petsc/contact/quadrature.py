@@ -39,17 +39,26 @@ def gauss_points(face_type, xs_ref, xs_cur, s_gids, n):
             "source_nodes": src, "source_shape": shp, "node": src[np.arange(len(src)), np.argmax(shp, axis=1)]}
 
 
-def found_pass(points, found, t_gids, t_xref, t_size):
+def faced_points(found, t_xref):
+    """(p, 3): the reference position of the T point each point faces (zeros where it found no face); found is
+    search.closest_faces' dict, t_xref (k, nv, 3) the reference coordinates of the T faces given to it."""
+    ok = found["face"] >= 0
+    out = np.zeros((len(ok), 3))
+    out[ok] = np.einsum("pv,pvi->pi", found["shape"][ok], t_xref[found["face"][ok]])
+    return out
+
+
+def found_pass(points, found, t_gids, t_xref, t_size, faced=None):
     """The Pass of the points that found a T face; found is search.closest_faces' dict for points["x_cur"].
 
     points: dict with x_ref, weight, size, node and optionally source_nodes, source_shape
     (nodal quadrature when absent). t_gids (k, nv), t_xref (k, nv, 3), t_size (k,): the T
-    faces given to the search.
+    faces given to the search; faced: faced_points(found, t_xref) when the caller has it already.
     """
     ok = found["face"] >= 0
     f = found["face"][ok]
     N = found["shape"][ok]
-    x_target = np.einsum("pv,pvi->pi", N, t_xref[f])
+    x_target = (faced_points(found, t_xref) if faced is None else faced)[ok]
     delta0 = np.einsum("pi,pi->p", points["x_ref"][ok] - x_target, found["normal"][ok])
     src = points.get("source_nodes")
     return Pass(node=points["node"][ok], area=points["weight"][ok], size=points["size"][ok],
