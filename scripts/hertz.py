@@ -123,6 +123,21 @@ def run_case(level, formulation, integration, slave, ranks, petsc=(), block_leve
     return out
 
 
+def solved(level, formulation, integration, slave, ranks, petsc, reuse, block_level=None, variant=None,
+           sliding="finite"):
+    """The case's output folder: its finished run (status ok) with reuse, else a new run_case."""
+    out = case_dir(level, formulation, integration, slave, block_level, variant, sliding)
+    done = out / "summary.json"
+    if reuse and done.is_file() and json.loads(done.read_text())["status"] == "ok":
+        return out
+    return run_case(level, formulation, integration, slave, ranks, petsc, block_level, variant, sliding)
+
+
+def pair(row, key, scale=None, fmt="{:.3f}"):
+    """'sphere / block' of one measure; scale(row, surface) divides it."""
+    return " / ".join(fmt.format(row[f"{key}_{s}"] / (scale(row, s) if scale else 1.0)) for s in SURFACES)
+
+
 def surface_vertices(gm, name):
     """Original vertex ids and faces (k, 3) of a named surface of the global mesh."""
     bit = gm.surface_names.index(name)
@@ -273,20 +288,13 @@ def variant_probe(levels, ranks, variants, petsc, reuse):
     for level, n in zip(levels, ranks):
         cases = [c[:2] for c in LEVEL_CASES.get(level, CASES) if c[1:] == ("segment", "finite")]
         for (formulation, integration), slave, variant in ((c, s, v) for c in cases for s in SLAVES for v in variants):
-            out = case_dir(level, formulation, integration, slave, variant=variant)
-            done = out / "summary.json"
-            if not (reuse and done.is_file() and json.loads(done.read_text())["status"] == "ok"):
-                run_case(level, formulation, integration, slave, n, petsc, variant=variant)
+            out = solved(level, formulation, integration, slave, n, petsc, reuse, variant=variant)
             r, _ = analyse(level, formulation, integration, slave, out, variant=variant)
-            p0 = r["p0_hertz"]
+            p0, a_H = (lambda r, s: r["p0_hertz"]), (lambda r, s: r["a_hertz"])
             print(f"{level} {formulation} {slave} {variant}: {r['newton']}, {r['wall_s']:.1f}; {r['force']:.4f}; "
-                  f"{pair_text(r, 'max_t', p0)}, {pair_text(r, 'interior_std')}, {pair_text(r, 'interior_max')}, "
-                  f"{pair_text(r, 'fit_p0', p0)}, {pair_text(r, 'a', r['a_hertz'])}", flush=True)
-
-
-def pair_text(row, key, scale=1.0):
-    """'sphere / block' of one measure."""
-    return " / ".join(f"{row[f'{key}_{s}'] / scale:.4f}" for s in SURFACES)
+                  f"{pair(r, 'max_t', p0, '{:.4f}')}, {pair(r, 'interior_std', fmt='{:.4f}')}, "
+                  f"{pair(r, 'interior_max', fmt='{:.4f}')}, {pair(r, 'fit_p0', p0, '{:.4f}')}, "
+                  f"{pair(r, 'a', a_H, '{:.4f}')}", flush=True)
 
 
 def main():
@@ -321,11 +329,8 @@ def main():
 
     def case(level, formulation, integration, sliding, slave, ranks, block_level=None):
         t0 = time.perf_counter()
-        out = case_dir(level, formulation, integration, slave, block_level, sliding=sliding)
-        done = out / "summary.json"
-        if not (args.reuse and done.is_file() and json.loads(done.read_text())["status"] == "ok"):
-            out = run_case(level, formulation, integration, slave, ranks, args.petsc.split(), block_level,
-                           sliding=sliding)
+        out = solved(level, formulation, integration, slave, ranks, args.petsc.split(), args.reuse, block_level,
+                     sliding=sliding)
         row, prof = analyse(level, formulation, integration, slave, out, block_level, sliding=sliding)
         row["ranks"] = ranks
         print(f"{level} (block {row['block_level']}) {formulation} {integration} {sliding} {slave}: max t/p0 "
@@ -353,9 +358,6 @@ def main():
         w.writeheader()
         w.writerows(rows + probes)
     plot(rows, profiles, args.levels[-1], docs / "hertz.png")
-
-    def pair(row, key, scale=None, fmt="{:.3f}"):
-        return " / ".join(fmt.format(row[f"{key}_{s}"] / (scale(row, s) if scale else 1.0)) for s in SURFACES)
 
     table = []
     for r in rows:
