@@ -29,12 +29,12 @@ def mpi_tmp(comm):
         shutil.rmtree(path, ignore_errors=True)
 
 
-def run_scene(scene_path, out, overrides=(), comm=MPI.COMM_WORLD):
-    """Load, run and return (run, summary); every rank calls it."""
+def run_scene(scene_path, out, overrides=(), comm=MPI.COMM_WORLD, log=None):
+    """Load, run and return (run, summary); every rank calls it. log receives the run's lines (rank 0's)."""
     from qsc_petsc.run import Run
     from qsc_petsc.scene import load_scene
     scene = load_scene(scene_path, overrides)
-    run = Run(scene, comm, out, log=lambda *a, **k: None)
+    run = Run(scene, comm, out, log=log or (lambda *a, **k: None))
     summary = run.execute()
     return run, summary
 

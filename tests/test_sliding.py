@@ -86,16 +86,9 @@ def test_sliding_is_validated_and_shown_by_check(tmp_path):
 
 def _run_logged(tmp_path, overrides):
     """Run two_cubes_dies (MUMPS) with overrides; returns the summary and the lines the run logged."""
-    from mpi4py import MPI
-
-    from qsc_petsc.run import Run
     lines = []
-    run = Run(load_scene(CONFIGS / "two_cubes_dies.toml", overrides), MPI.COMM_WORLD, tmp_path,
-              log=lambda *a, **k: lines.append(a[0]))
-    try:
-        return run.execute(), lines
-    finally:
-        run.destroy()
+    _, summary = run_scene(CONFIGS / "two_cubes_dies.toml", tmp_path, overrides, log=lines.append)
+    return summary, lines
 
 
 def test_slip_is_measured_and_small_sliding_out_of_range_is_named(tmp_path):
