@@ -1,5 +1,7 @@
 """The exceptions qsc_petsc raises, so callers can catch its own failures apart from bugs."""
 
+import re
+
 
 class QscError(Exception):
     """Base of every error qsc_petsc raises on purpose; the message is one line for the user."""
@@ -15,3 +17,20 @@ class MeshError(QscError):
 
 class ConvergenceError(QscError):
     """A solve failed; the message names the reason, the load step and the iteration counts."""
+
+
+def petsc_detail(exc):
+    """PETSc's own account of a PETSc.Error, from the traceback its text carries: the innermost routine and the
+    specific message, e.g. "KSPSetType(): Unable to find requested KSP type nonexist"; "" if it has none.
+
+    petsc4py keeps PETSc's error message in the exception instead of printing it, so a user sees it only if
+    qsc's line quotes it."""
+    lines = [re.sub(r"^\[\d+\]\s*", "", line) for line in str(exc).splitlines()[1:]]
+    routines = [i for i, line in enumerate(lines) if re.match(r"^\S+\(\) at ", line)]
+    if not routines:
+        return ""
+    last = routines[-1]
+    message = [line for line in lines[last + 1:] if line.strip()]
+    # the first line is the error class's generic text ("Error in external library"), the rest the specifics
+    specific = message[1:] or message
+    return f"{lines[last].split(' at ')[0]}: {' '.join(specific)}".strip().rstrip(":")

@@ -98,11 +98,11 @@ def set_from_options(obj, what):
     options database is the same everywhere, so every rank fails here together)."""
     from petsc4py import PETSc
 
-    from .errors import SceneError
+    from .errors import SceneError, petsc_detail
     try:
         obj.setFromOptions()
     except PETSc.Error as exc:
         if exc.ierr not in _OPTION_ERRORS:
             raise
-        raise SceneError(f"PETSc options of the {what}: {_OPTION_ERRORS[exc.ierr]} (PETSc error {exc.ierr}; "
-                         "PETSc's message above names the option)") from None
+        raise SceneError(f"PETSc options of the {what}: {_OPTION_ERRORS[exc.ierr]} (PETSc error {exc.ierr} in "
+                         f"{petsc_detail(exc)})") from None

@@ -15,7 +15,7 @@ from petsc4py import PETSc
 
 from . import options, preconditioner
 from .contact.penalty import multipliers_update, row_response
-from .errors import ConvergenceError, SceneError
+from .errors import ConvergenceError, SceneError, petsc_detail
 
 SNES_REASONS = {v: k for k, v in vars(PETSc.SNES.ConvergedReason).items() if not k.startswith("_")}
 KSP_REASONS = {v: k for k, v in vars(PETSc.KSP.ConvergedReason).items() if not k.startswith("_")}
@@ -467,16 +467,15 @@ class System:
             except PETSc.Error as exc:     # on every rank: the reason is collective; a failed solve like any other
                 if exc.ierr == PETSC_ERR_MISSING_FACTOR:     # met at the first factorization, on every rank
                     raise SceneError("the PETSc options ask for a factorization that no installed package "
-                                     "provides (PETSc error 92; PETSc's message above names the matrix and "
-                                     "package): check -qsc_pc_factor_mat_solver_type and "
-                                     "-qsc_band_pc_factor_mat_solver_type") from None
+                                     f"provides (PETSc error 92 in {petsc_detail(exc)}): check "
+                                     "-qsc_pc_factor_mat_solver_type and -qsc_band_pc_factor_mat_solver_type") from None
                 if exc.ierr != PETSC_ERR_NOT_CONVERGED:
                     if not _all_failed(self.agree_comm):
                         raise
                     raise ConvergenceError(
                         f"PETSc error {exc.ierr} ({PETSC_ERRORS.get(exc.ierr, 'see its message')}) on every rank "
-                        f"inside the solve at load factor {t:.6g}; PETSc's message above names the routine (a "
-                        f"solver option the library rejects, e.g. one of -qsc_pc_hypre_*, is a usual cause)") from None
+                        f"inside the solve at load factor {t:.6g}, in {petsc_detail(exc)} (a solver option the "
+                        f"library rejects, e.g. one of -qsc_pc_hypre_*, is a usual cause)") from None
             if self.snes.getConvergedReason() > 0 or not self._more_mumps_workspace():
                 break
             u.destroy()

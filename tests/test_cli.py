@@ -366,6 +366,7 @@ def test_library_error_in_the_solve_is_a_failed_solve(tmp_path, ranks):
     assert "Traceback" not in out and "internal error" not in out and "MPI_ABORT" not in out, out
     failed = [line for line in own_lines(out) if line.startswith("qsc: solve failed: ")]
     assert len(failed) == 1 and failed[0].startswith("qsc: solve failed: load step 1: PETSc error 76 "), out
+    assert "in PCSetUp_HYPRE(): Error in jac->setup()" in failed[0], out    # PETSc's message, quoted
     summary = _summary(tmp_path / "out")
     assert summary["status"] == "failed" and summary["error"] in failed[0]
 
@@ -404,20 +405,24 @@ def test_command_line_options_win_over_the_scene(tmp_path):
                                     ["-qsc_pc_type", "hypre", "-qsc_pc_hypre_boomeramg_relax_type_down", "nonsense"]])
 def test_bad_petsc_option_is_an_input_error(tmp_path, option):
     """A PETSc option PETSc refuses (unknown type, value that does not parse, none of its choices) shall exit 2
-    with one qsc line."""
+    with one qsc line that quotes PETSc's message, which names the value."""
     proc = subprocess.run([sys.executable, "-m", "qsc_petsc.cli", "run", str(CONFIGS / "block_compression.toml"),
                            "--out", str(tmp_path), *option], capture_output=True, text=True, timeout=120,
                           check=False)
     assert proc.returncode == 2
     assert "qsc: error: PETSc options of the solver" in proc.stdout
+    # PETSc's own message is quoted (petsc4py keeps it in the exception, nothing else prints it)
+    assert f"{option[-1]}" in proc.stdout.splitlines()[-1], proc.stdout
     assert "Traceback" not in proc.stderr + proc.stdout
 
 
 BAND_OPTIONS = {
     "unknown type": (["-qsc_band_pc_type", "nonexistent"],
-                     "qsc: error: PETSc options of the contact band's solve (-qsc_band_*): an unknown type"),
+                     "qsc: error: PETSc options of the contact band's solve (-qsc_band_*): an unknown type",
+                     "in PCSetType(): Unable to find requested PC type nonexistent"),
     "no package": (["-qsc_band_pc_factor_mat_solver_type", "superlu"],
-                   "qsc: error: the PETSc options ask for a factorization that no installed package provides"),
+                   "qsc: error: the PETSc options ask for a factorization that no installed package provides",
+                   "in MatGetFactor(): MatSolverType superlu does not support"),
 }
 
 
@@ -429,10 +434,10 @@ def test_bad_band_option_ends_every_rank_with_exit_2(tmp_path, case):
     provides is met at the first factorization (its half-built preconditioner crashed PETSc's finalization
     until the failed run was destroyed before exit)."""
     serial_only()
-    option, expected = BAND_OPTIONS[case]
+    option, expected, quoted = BAND_OPTIONS[case]
     code, out = run_qsc(["run", CONFIGS / "two_cubes_dies.toml", "--out", tmp_path / "out", "-qsc_ksp_type", "gmres",
                          "-qsc_pc_type", "hypre", *option], 2, tmp_path, 60.0)
     assert code == 2, out
     assert "Traceback" not in out and "SEGV" not in out, out
     errors = [line for line in own_lines(out) if line.startswith("qsc: error: ")]
-    assert len(errors) == 1 and errors[0].startswith(expected), out
+    assert len(errors) == 1 and errors[0].startswith(expected) and quoted in errors[0], out
