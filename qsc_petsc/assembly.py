@@ -465,6 +465,20 @@ def symmetry_axis(mesh, index, surface):
     return axis
 
 
+def _rigid_fields(comm, x):
+    """The 6 rigid motions at points x (k, 3) of one body spread over comm's ranks, rotations about the body's
+    centre: translations along x, y, z, then rotations about z, x, y; (6, k, 3)."""
+    centre = comm.allreduce(x.sum(axis=0), op=MPI.SUM) / max(comm.allreduce(len(x)), 1)
+    x = x - centre
+    fields = np.zeros((6, len(x), 3))
+    for k in range(3):
+        fields[k, :, k] = 1.0
+    for k, (i, j) in enumerate(((0, 1), (1, 2), (2, 0))):
+        fields[3 + k, :, i] = -x[:, j]
+        fields[3 + k, :, j] = x[:, i]
+    return fields
+
+
 def rigid_body_modes(mesh, template, held=()):
     """Near-nullspace: the 6 rigid-body modes of every body, each supported on its own body only.
 
@@ -485,19 +499,11 @@ def rigid_body_modes(mesh, template, held=()):
         sel = in_body[owned_v]
         x = mesh.coords[owned_v[sel]]
         r = rows[sel]
-        centre = mesh.comm.allreduce(x.sum(axis=0), op=MPI.SUM) / max(mesh.comm.allreduce(len(x)), 1)
-        x = x - centre
         modes = []
-        for k in range(6):
+        for field in _rigid_fields(mesh.comm, x):
             v = template.duplicate()
             v.set(0.0)
-            a = v.getArray()
-            if k < 3:
-                a[r + k] = 1.0
-            else:
-                i, j = ((0, 1), (1, 2), (2, 0))[k - 3]
-                a[r + i] = -x[:, j]
-                a[r + j] = x[:, i]
+            v.getArray()[r[:, None] + np.arange(3)] = field
             modes.append(v)
         for v in modes:
             a = v.getArray()
@@ -515,3 +521,43 @@ def rigid_body_modes(mesh, template, held=()):
             v.normalize()
         vecs.extend(modes)
     return PETSc.NullSpace().create(vectors=vecs, comm=mesh.comm)
+
+
+def slip_modes(mesh, template, surfaces, held_dofs):
+    """The contact band preconditioner's coarse space: per body with a contact surface, its 6 rigid motions
+    weighted by w = 1 - d / D, where d is the distance from the surface's best-fit plane and D the largest d
+    over the body (w = 1 on the surface, 0 on its far side; a body with several contact surfaces takes the
+    largest w). Returns this rank's owned dof values, (6 x bodies, owned dofs), zero on held_dofs (global).
+
+    Frictionless contact lets two bodies slide on each other, resisted only by their deformation between the
+    contact and their supports: a smooth, global, soft motion. The multigrid does not resolve it (its coarse
+    spaces follow the stiff normal coupling across the interface): on two cubes between sticking dies (70k
+    dofs) the smallest eigenvalues of the preconditioned operator, 0.05-0.09, were the relative slides along
+    x and y and the twist about the normal, each a rigid motion of the interface fading towards the die.
+    These fields span them closely enough for a Galerkin correction (docs/performance.md)."""
+    comm = mesh.comm
+    owned_v = np.flatnonzero(mesh.owned)
+    r0, r1 = template.getOwnershipRange()
+    rows = (3 * mesh.gvert[owned_v] - r0).astype(np.int64)
+    weights = {}
+    for name in surfaces:
+        v = mesh.surface_vertices(name)
+        x = mesh.coords[v[mesh.owned[v]]]
+        count = comm.allreduce(len(x))
+        centre = comm.allreduce(x.sum(axis=0)) / count
+        normal = np.linalg.eigh(comm.allreduce((x - centre).T @ (x - centre)))[1][:, 0]
+        cells = mesh.surface_faces(name)[0]
+        body = comm.allreduce(int(mesh.cell_body[cells[0]]) if len(cells) else -1, op=MPI.MAX)
+        in_body = mesh.body_mask(body)[owned_v]
+        d = np.abs((mesh.coords[owned_v] - centre) @ normal)
+        far = comm.allreduce(float(d[in_body].max(initial=0.0)), op=MPI.MAX)
+        w = np.where(in_body, np.clip(1.0 - d / far, 0.0, 1.0) if far > 0 else 1.0, 0.0)
+        weights[body] = np.maximum(weights.get(body, 0.0), w)
+    modes = np.zeros((6 * len(weights), r1 - r0))
+    for k, body in enumerate(sorted(weights)):
+        in_body = mesh.body_mask(body)[owned_v]
+        w = weights[body][in_body]
+        fields = _rigid_fields(comm, mesh.coords[owned_v[in_body]]) * w[None, :, None]
+        modes[6 * k:6 * k + 6][:, rows[in_body][:, None] + np.arange(3)] = fields
+    modes[:, np.asarray(held_dofs, dtype=np.int64) - r0] = 0.0
+    return modes

@@ -19,6 +19,11 @@ options (`-qsc_pc_*`); the band is one submatrix across all ranks, factored once
 (`-qsc_band_*`: default preonly + Cholesky with MUMPS). Both parts are Python contexts in a PETSc composite
 sharing a Parts flag, so that System can keep their setups across a new search that moved only the
 projections.
+
+Under GMRES the multigrid part starts with a Galerkin correction on the slip modes (assembly.slip_modes;
+scene key solver.contact_slip_modes): bodies in frictionless contact slide on each other at little cost in
+energy, a global motion the multigrid leaves to the Krylov method (two cubes, 70k dofs: 68 -> 55 Krylov
+iterations, docs/performance.md).
 """
 
 import numpy as np
@@ -39,6 +44,7 @@ HYPRE_DEFAULTS = {"pc_hypre_boomeramg_coarsen_type": "HMIS", "pc_hypre_boomeramg
                   "pc_hypre_boomeramg_relax_type_down": "l1-Gauss-Seidel",
                   "pc_hypre_boomeramg_relax_type_up": "backward-l1-Gauss-Seidel"}
 GMRES_RESTART = 100        # above the iteration counts measured (docs/performance.md): no restarts
+COARSE_CUTOFF = 1e-12      # eigenvalues of Z^T J Z below this fraction of its largest: directions dropped
 
 
 def _owned_marked(template, dofs):
@@ -89,11 +95,15 @@ class Parts:
 
 class MultigridPart:
     """PCPYTHON context: the band composite's multigrid (hypre or gamg, tuned by -qsc_pc_*), set up again
-    unless parts.keep."""
+    unless parts.keep; with a coarse space Z (slip_modes: rows of this rank's owned dof values), a Galerkin
+    correction on Z first: c = (Z^T P Z)^-1 Z^T x, then the multigrid on x - P Z c, y = Z c + AMG(x - P Z c).
+    P Z is kept from the setup, so the correction costs no product with the operator per application."""
 
-    def __init__(self, inner, parts):
+    def __init__(self, inner, parts, coarse=None):
         self.inner, self.parts = inner, parts
         self.ready = False
+        self.Z = coarse if coarse is not None and len(coarse) else None
+        self.PZ = self.E_inv = self.rest = None
 
     def setUp(self, pc):
         keep = self.parts.keep and self.ready
@@ -104,14 +114,43 @@ class MultigridPart:
         self.inner.setOperators(A, P)
         self.inner.setUp()
         self.ready = True
+        if self.Z is not None:
+            self._coarse_setup(P)
+
+    def _coarse_setup(self, P):
+        z, pz = P.createVecs()
+        self.PZ = np.empty_like(self.Z)
+        for k, mode in enumerate(self.Z):
+            z.getArray()[:] = mode
+            P.mult(z, pz)
+            self.PZ[k] = pz.getArray()
+        z.destroy()
+        self.comm = pz.getComm().tompi4py()
+        E = self.comm.allreduce(self.Z @ self.PZ.T)
+        lam, Q = np.linalg.eigh(0.5 * (E + E.T))
+        # a direction the operator leaves (nearly) free, or a mode zero on this body's supports alone, is dropped
+        keep = lam > COARSE_CUTOFF * lam.max()
+        self.E_inv = (Q[:, keep] / lam[keep]) @ Q[:, keep].T
+        self.rest = pz
 
     def apply(self, pc, x, y):
-        self.inner.apply(x, y)
+        if self.E_inv is None:
+            self.inner.apply(x, y)
+            return
+        xa = x.getArray(readonly=True)
+        c = self.E_inv @ self.comm.allreduce(self.Z @ xa)
+        self.rest.getArray()[:] = xa - c @ self.PZ
+        self.inner.apply(self.rest, y)
+        y.getArray()[:] += c @ self.Z
 
     def view(self, pc, viewer):
+        if self.Z is not None:
+            viewer.printfASCII(f"Galerkin correction on {len(self.Z)} slip modes first (qsc_petsc.assembly.slip_modes)\n")
         self.inner.view(viewer)
 
     def destroy(self, pc=None):
+        if self.rest is not None:
+            self.rest.destroy()
         try:
             self.inner.destroy()
         except PETSc.Error:
@@ -180,9 +219,10 @@ def wants_band(mode, has_pairs):
     return mode == "band" or amg_type() in AMG_TYPES
 
 
-def install_band_pc(ksp, band, comm):
+def install_band_pc(ksp, band, comm, coarse=None):
     """Give ksp a fresh composite PC: the multigrid, then the exact solve on the contact band (BandSolve), whose
-    dofs (this rank's, from band_dofs) are `band`.
+    dofs (this rank's, from band_dofs) are `band`; `coarse` (slip_modes' array, or None) gives the multigrid
+    a Galerkin correction first, except under a named CG (the correction is not symmetric).
 
     When the options name no KSP, it becomes GMRES (right-preconditioned, as the true-residual test
     needs) with the multiplicative composite, one V-cycle per iteration; a named CG gets the
@@ -211,7 +251,7 @@ def install_band_pc(ksp, band, comm):
     set_from_options(amg, "contact band's multigrid (-qsc_pc_*)")
     remove_options(added)               # BoomerAMG has read them
     parts = Parts()
-    pc.getCompositePC(0).setPythonContext(MultigridPart(amg, parts))
+    pc.getCompositePC(0).setPythonContext(MultigridPart(amg, parts, None if krylov == "cg" else coarse))
     pc.getCompositePC(1).setPythonContext(BandSolve(band, comm, parts))
     ksp.setPC(pc)
     return comm.allreduce(len(band)), parts

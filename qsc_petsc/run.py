@@ -136,9 +136,12 @@ class Run:
             held = [(surface, None if die.condition == "sticking" else np.asarray(die.normal, float))
                     for die in scene.die for surface in die.surfaces]
             nullspace = assembly.rigid_body_modes(mesh, u, held)
+            surfaces = sorted({name for pair in scene.contact for name in (pair.slave, pair.master)})
+            slip = (assembly.slip_modes(mesh, u, surfaces, self.bc_dofs)
+                    if surfaces and scene.solver.contact_slip_modes else None)
             self.system = System(K, self.f_ext, self.bc_dofs, bc_values, nullspace, comm,
                                  scene.solver.max_active_set_iterations, scene.solver.contact_preconditioner,
-                                 scene.solver.contact_band_layers)
+                                 scene.solver.contact_band_layers, slip)
             self.n_constrained = comm.allreduce(len(self.bc_dofs), op=MPI.SUM)
             self.restraint = Restraint(mesh, self.bc_dofs, u)
             self.system.free_motions = lambda terms, active: describe(self.restraint.free(terms, active))

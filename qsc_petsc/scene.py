@@ -523,6 +523,10 @@ SCHEMA = Table({
                                          default="auto"),
         "contact_band_layers": Int("Rings of element neighbours added to the contact rows' dofs in the band.",
                                    ge=0, le=5, default=1),
+        "contact_slip_modes": Bool("With the band preconditioner (unless ksp_type is cg): a Galerkin correction "
+                                   "on each contact body's rigid motions, faded from its contact surface to its "
+                                   "far side, which the multigrid leaves to the Krylov method (frictionless "
+                                   "bodies sliding on each other).", default=True),
     }, "Nonlinear solver controls."),
     "petsc": Options(f"PETSc options without the {OPTIONS_PREFIX!r} prefix, nested tables joined by \"_\"; "
                      "merged over the defaults.", default={"ksp_rtol": "1e-10"}),

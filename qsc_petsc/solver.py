@@ -122,12 +122,15 @@ class ConstraintTerm:
 class System:
     """K0 u - t b + sum_terms G^T m with Dirichlet rows u_i - t ubar_i, solved by SNES."""
 
-    def __init__(self, K, f_ext, bc_dofs, bc_values, nullspace, comm, max_it=50, contact_pc="auto", band_layers=1):
+    def __init__(self, K, f_ext, bc_dofs, bc_values, nullspace, comm, max_it=50, contact_pc="auto", band_layers=1,
+                 slip_modes=None):
         self.comm = comm
         # kept for _all_failed alone: no other collective ever runs on it, whatever the ranks were doing
         self.agree_comm = comm.Dup()
         # contact_pc: "auto" | "band" | "none" (see preconditioner.py); band_dofs: size of the last band
         self.contact_pc, self.band_layers, self.band_dofs = contact_pc, band_layers, 0
+        # the band preconditioner's coarse space (assembly.slip_modes: owned dof values, one row per mode) or None
+        self.slip_modes = slip_modes
         self.u = K.createVecRight()
         self.u.set(0.0)
         ubar = self.u.duplicate()
@@ -264,7 +267,7 @@ class System:
                                                                            op=MPI.LAND)
             if not same:
                 self.band_dofs, self.band_parts = preconditioner.install_band_pc(self.snes.getKSP(), band,
-                                                                                 self.comm)
+                                                                                 self.comm, self.slip_modes)
                 self.band, self.pc_rows = band, None
             # the first Jacobian may keep the preconditioner as it is (_keep_or_rebuild_pc)
             self.pc_candidate = same and not same_rows
