@@ -527,7 +527,8 @@ def slip_modes(mesh, template, surfaces, held_dofs):
     """The contact band preconditioner's coarse space: per body with a contact surface, its 6 rigid motions
     weighted by w = 1 - d / D, where d is the distance from the surface's best-fit plane and D the largest d
     over the body (w = 1 on the surface, 0 on its far side; a body with several contact surfaces takes the
-    largest w). Returns this rank's owned dof values, (6 x bodies, owned dofs), zero on held_dofs (global).
+    largest w). Returns one block per body, (owned dof positions on this rank, their values (6, positions)),
+    zero on held_dofs (global).
 
     Frictionless contact lets two bodies slide on each other, resisted only by their deformation between the
     contact and their supports: a smooth, global, soft motion. The multigrid does not resolve it (its coarse
@@ -553,11 +554,16 @@ def slip_modes(mesh, template, surfaces, held_dofs):
         far = comm.allreduce(float(d[in_body].max(initial=0.0)), op=MPI.MAX)
         w = np.where(in_body, np.clip(1.0 - d / far, 0.0, 1.0) if far > 0 else 1.0, 0.0)
         weights[body] = np.maximum(weights.get(body, 0.0), w)
-    modes = np.zeros((6 * len(weights), r1 - r0))
-    for k, body in enumerate(sorted(weights)):
+    held = np.zeros(r1 - r0, dtype=bool)
+    held[np.asarray(held_dofs, dtype=np.int64) - r0] = True
+    blocks = []
+    for body in sorted(weights):
         in_body = mesh.body_mask(body)[owned_v]
         w = weights[body][in_body]
         fields = _rigid_fields(comm, mesh.coords[owned_v[in_body]]) * w[None, :, None]
-        modes[6 * k:6 * k + 6][:, rows[in_body][:, None] + np.arange(3)] = fields
-    modes[:, np.asarray(held_dofs, dtype=np.int64) - r0] = 0.0
-    return modes
+        cols = (rows[in_body][:, None] + np.arange(3)).ravel()
+        values = fields.reshape(6, -1)
+        values[:, held[cols]] = 0.0
+        order = np.argsort(cols)
+        blocks.append((cols[order], np.ascontiguousarray(values[:, order])))
+    return blocks

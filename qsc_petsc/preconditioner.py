@@ -20,10 +20,10 @@ options (`-qsc_pc_*`); the band is one submatrix across all ranks, factored once
 sharing a Parts flag, so that System can keep their setups across a new search that moved only the
 projections.
 
-Under GMRES the multigrid part starts with a Galerkin correction on the slip modes (assembly.slip_modes;
-scene key solver.contact_slip_modes): bodies in frictionless contact slide on each other at little cost in
-energy, a global motion the multigrid leaves to the Krylov method (two cubes, 70k dofs: 68 -> 55 Krylov
-iterations, docs/performance.md).
+Under GMRES the band's part starts with a Galerkin correction on the slip modes (SlipCorrection,
+assembly.slip_modes; scene key solver.contact_slip_modes): bodies in frictionless contact slide on each other
+at little cost in energy, a global motion the multigrid leaves to the Krylov method (two cubes, 70k dofs: 68
+-> 55 Krylov iterations, docs/performance.md). Before the multigrid instead of after it: the same counts.
 """
 
 import numpy as np
@@ -45,6 +45,7 @@ HYPRE_DEFAULTS = {"pc_hypre_boomeramg_coarsen_type": "HMIS", "pc_hypre_boomeramg
                   "pc_hypre_boomeramg_relax_type_up": "backward-l1-Gauss-Seidel"}
 GMRES_RESTART = 100        # above the iteration counts measured (docs/performance.md): no restarts
 COARSE_CUTOFF = 1e-12      # eigenvalues of Z^T J Z below this fraction of its largest: directions dropped
+RUN_GAP = 4096             # the slip correction's dense slices bridge gaps of up to this many dofs
 
 
 def _owned_marked(template, dofs):
@@ -93,17 +94,106 @@ class Parts:
         self.keep = False
 
 
+def _runs(positions, gap=RUN_GAP):
+    """Sorted positions as a few slices that cover them: consecutive runs, joined across gaps of at most `gap`
+    positions (a body's dofs are a few long runs in PETSc's numbering: dense slices beat indexed access)."""
+    if len(positions) == 0:
+        return []
+    breaks = np.flatnonzero(np.diff(positions) > gap + 1)
+    starts = np.concatenate([[positions[0]], positions[breaks + 1]])
+    stops = np.concatenate([positions[breaks], [positions[-1]]]) + 1
+    return [slice(int(a), int(b)) for a, b in zip(starts, stops)]
+
+
+class SlipCorrection:
+    """A Galerkin correction on a coarse space Z (assembly.slip_modes: blocks of modes, each on its body's
+    owned dofs): c = (Z^T P Z)^-1 Z^T r, then the rest r - P Z c goes on to the next solver and Z c is added
+    to its answer. Z and P Z are kept dense on a few slices of the local dofs (P Z from the setup, where it is
+    nonzero: the body and, through the contact rows, the dofs facing it): an application costs no product
+    with the operator and one reduction."""
+
+    def __init__(self, blocks):
+        self.n_modes = [len(values) for _, values in blocks]
+        self.Z = [self._dense(cols, values) for cols, values in blocks]   # per block: [(slice, values there)]
+        self.PZ = self.E_inv = self.rest = None
+
+    @staticmethod
+    def _dense(positions, values):
+        """[(slice, values on it)] for values (modes, len(positions)) given at sorted positions."""
+        pieces = []
+        for run in _runs(positions):
+            dense = np.zeros((len(values), run.stop - run.start))
+            inside = (positions >= run.start) & (positions < run.stop)
+            dense[:, positions[inside] - run.start] = values[:, inside]
+            pieces.append((run, dense))
+        return pieces
+
+    def set_up(self, P):
+        z, pz = P.createVecs()
+        products = []
+        for pieces, m in zip(self.Z, self.n_modes):
+            PZ = np.empty((m, pz.getLocalSize()))
+            for k in range(m):
+                za = z.getArray()
+                za[:] = 0.0
+                for run, values in pieces:
+                    za[run] = values[k]
+                P.mult(z, pz)
+                PZ[k] = pz.getArray()
+            products.append(PZ)
+        z.destroy()
+        self.PZ = []
+        for PZ in products:
+            nonzero = np.flatnonzero(np.any(PZ != 0.0, axis=0))
+            self.PZ.append(self._dense(nonzero, PZ[:, nonzero]))
+        self.comm = pz.getComm().tompi4py()
+        # a rank may hold none of a body's dofs: its blocks start from zeros
+        E = self.comm.allreduce(np.block([[sum((values @ PZ[:, run].T for run, values in pieces),
+                                               np.zeros((m, len(PZ)))) for PZ in products]
+                                          for pieces, m in zip(self.Z, self.n_modes)]))
+        lam, Q = np.linalg.eigh(0.5 * (E + E.T))
+        # a direction the operator leaves (nearly) free, or a mode zero on this body's supports alone, is dropped
+        keep = lam > COARSE_CUTOFF * lam.max()
+        self.E_inv = (Q[:, keep] / lam[keep]) @ Q[:, keep].T
+        if self.rest is not None:
+            self.rest.destroy()
+        self.rest = pz
+
+    def split(self, r):
+        """(c, the rest r - P Z c as a Vec this object owns) for a residual Vec r (collective)."""
+        ra = r.getArray(readonly=True)
+        zr = np.concatenate([sum((values @ ra[run] for run, values in pieces), np.zeros(m))
+                             for pieces, m in zip(self.Z, self.n_modes)])
+        c = np.split(self.E_inv @ self.comm.allreduce(zr), np.cumsum(self.n_modes)[:-1])
+        rest = self.rest.getArray()
+        rest[:] = ra
+        for ck, pieces in zip(c, self.PZ):
+            for run, values in pieces:
+                rest[run] -= ck @ values
+        return c, self.rest
+
+    def add(self, c, y):
+        """y += Z c."""
+        ya = y.getArray()
+        for ck, pieces in zip(c, self.Z):
+            for run, values in pieces:
+                ya[run] += ck @ values
+
+    def modes(self):
+        return sum(self.n_modes)
+
+    def destroy(self):
+        if self.rest is not None:
+            self.rest.destroy()
+
+
 class MultigridPart:
     """PCPYTHON context: the band composite's multigrid (hypre or gamg, tuned by -qsc_pc_*), set up again
-    unless parts.keep; with a coarse space Z (slip_modes: rows of this rank's owned dof values), a Galerkin
-    correction on Z first: c = (Z^T P Z)^-1 Z^T x, then the multigrid on x - P Z c, y = Z c + AMG(x - P Z c).
-    P Z is kept from the setup, so the correction costs no product with the operator per application."""
+    unless parts.keep."""
 
-    def __init__(self, inner, parts, coarse=None):
+    def __init__(self, inner, parts):
         self.inner, self.parts = inner, parts
         self.ready = False
-        self.Z = coarse if coarse is not None and len(coarse) else None
-        self.PZ = self.E_inv = self.rest = None
 
     def setUp(self, pc):
         keep = self.parts.keep and self.ready
@@ -114,43 +204,14 @@ class MultigridPart:
         self.inner.setOperators(A, P)
         self.inner.setUp()
         self.ready = True
-        if self.Z is not None:
-            self._coarse_setup(P)
-
-    def _coarse_setup(self, P):
-        z, pz = P.createVecs()
-        self.PZ = np.empty_like(self.Z)
-        for k, mode in enumerate(self.Z):
-            z.getArray()[:] = mode
-            P.mult(z, pz)
-            self.PZ[k] = pz.getArray()
-        z.destroy()
-        self.comm = pz.getComm().tompi4py()
-        E = self.comm.allreduce(self.Z @ self.PZ.T)
-        lam, Q = np.linalg.eigh(0.5 * (E + E.T))
-        # a direction the operator leaves (nearly) free, or a mode zero on this body's supports alone, is dropped
-        keep = lam > COARSE_CUTOFF * lam.max()
-        self.E_inv = (Q[:, keep] / lam[keep]) @ Q[:, keep].T
-        self.rest = pz
 
     def apply(self, pc, x, y):
-        if self.E_inv is None:
-            self.inner.apply(x, y)
-            return
-        xa = x.getArray(readonly=True)
-        c = self.E_inv @ self.comm.allreduce(self.Z @ xa)
-        self.rest.getArray()[:] = xa - c @ self.PZ
-        self.inner.apply(self.rest, y)
-        y.getArray()[:] += c @ self.Z
+        self.inner.apply(x, y)
 
     def view(self, pc, viewer):
-        if self.Z is not None:
-            viewer.printfASCII(f"Galerkin correction on {len(self.Z)} slip modes first (qsc_petsc.assembly.slip_modes)\n")
         self.inner.view(viewer)
 
     def destroy(self, pc=None):
-        if self.rest is not None:
-            self.rest.destroy()
         try:
             self.inner.destroy()
         except PETSc.Error:
@@ -167,8 +228,9 @@ class BandSolve:
     their corrections and cost a third more iterations (two cubes, 70k dofs: 123 against 83). Not
     factored again while parts.keep."""
 
-    def __init__(self, band, comm, parts=None):
+    def __init__(self, band, comm, parts=None, slip=None):
         self.parts = parts or Parts()
+        self.slip = slip                 # a SlipCorrection made before the band's solve, or None
         self.iset = PETSc.IS().createGeneral(band, comm=comm)
         ksp = PETSc.KSP().create(comm=comm)
         ksp.setOptionsPrefix("qsc_band_")
@@ -193,15 +255,27 @@ class BandSolve:
             self.scatter = PETSc.Scatter().create(whole, self.iset, self.xb, None)
             whole.destroy()
         self.ksp.setUp()
+        if self.slip is not None:
+            self.slip.set_up(P)
 
     def apply(self, pc, x, y):
+        if self.slip is not None:
+            c, x = self.slip.split(x)
         self.scatter.scatter(x, self.xb, PETSc.InsertMode.INSERT, PETSc.ScatterMode.FORWARD)
         self.ksp.solve(self.xb, self.yb)
         y.set(0.0)
         self.scatter.scatter(self.yb, y, PETSc.InsertMode.INSERT, PETSc.ScatterMode.REVERSE)
+        if self.slip is not None:
+            self.slip.add(c, y)
+
+    def view(self, pc, viewer):
+        if self.slip is not None:
+            viewer.printfASCII(f"Galerkin correction on {self.slip.modes()} slip modes, then the band's solve "
+                               "(qsc_petsc.assembly.slip_modes)\n")
+        self.ksp.view(viewer)
 
     def destroy(self, pc=None):
-        for obj in (self.ksp, self.sub, self.scatter, self.xb, self.yb, self.iset):
+        for obj in (self.ksp, self.sub, self.scatter, self.xb, self.yb, self.iset, self.slip):
             if obj is not None:
                 obj.destroy()
 
@@ -251,8 +325,9 @@ def install_band_pc(ksp, band, comm, coarse=None):
     set_from_options(amg, "contact band's multigrid (-qsc_pc_*)")
     remove_options(added)               # BoomerAMG has read them
     parts = Parts()
-    pc.getCompositePC(0).setPythonContext(MultigridPart(amg, parts, None if krylov == "cg" else coarse))
-    pc.getCompositePC(1).setPythonContext(BandSolve(band, comm, parts))
+    slip = SlipCorrection(coarse) if coarse and krylov != "cg" else None
+    pc.getCompositePC(0).setPythonContext(MultigridPart(amg, parts))
+    pc.getCompositePC(1).setPythonContext(BandSolve(band, comm, parts, slip))
     ksp.setPC(pc)
     return comm.allreduce(len(band)), parts
 

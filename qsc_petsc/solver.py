@@ -129,7 +129,7 @@ class System:
         self.agree_comm = comm.Dup()
         # contact_pc: "auto" | "band" | "none" (see preconditioner.py); band_dofs: size of the last band
         self.contact_pc, self.band_layers, self.band_dofs = contact_pc, band_layers, 0
-        # the band preconditioner's coarse space (assembly.slip_modes: owned dof values, one row per mode) or None
+        # the band preconditioner's coarse space (assembly.slip_modes: blocks of modes on owned dofs) or None
         self.slip_modes = slip_modes
         self.u = K.createVecRight()
         self.u.set(0.0)
