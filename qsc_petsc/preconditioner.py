@@ -26,6 +26,8 @@ at little cost in energy, a global motion the multigrid leaves to the Krylov met
 -> 55 Krylov iterations, docs/performance.md). Before the multigrid instead of after it: the same counts.
 """
 
+from contextlib import nullcontext
+
 import numpy as np
 from petsc4py import PETSc
 
@@ -189,10 +191,12 @@ class SlipCorrection:
 
 class MultigridPart:
     """PCPYTHON context: the band composite's multigrid (hypre or gamg, tuned by -qsc_pc_*), set up again
-    unless parts.keep."""
+    unless parts.keep; `soften(P)`, if given, is a context in which P is the operator BoomerAMG is to be set
+    up on (System.softened)."""
 
-    def __init__(self, inner, parts):
+    def __init__(self, inner, parts, soften=None):
         self.inner, self.parts = inner, parts
+        self.soften = soften
         self.ready = False
 
     def setUp(self, pc):
@@ -202,7 +206,11 @@ class MultigridPart:
             return
         A, P = pc.getOperators()
         self.inner.setOperators(A, P)
-        self.inner.setUp()
+        with self.soften(P) if self.soften else nullcontext():
+            self.inner.setUp()
+        # set up on the softened operator: P's values changed and changed back, so the inner PC, which records
+        # P's state, must not redo its setup at its next application
+        self.inner.setReusePreconditioner(self.soften is not None)
         self.ready = True
 
     def apply(self, pc, x, y):
@@ -293,10 +301,11 @@ def wants_band(mode, has_pairs):
     return mode == "band" or amg_type() in AMG_TYPES
 
 
-def install_band_pc(ksp, band, comm, coarse=None):
+def install_band_pc(ksp, band, comm, coarse=None, soften=None):
     """Give ksp a fresh composite PC: the multigrid, then the exact solve on the contact band (BandSolve), whose
     dofs (this rank's, from band_dofs) are `band`; `coarse` (slip_modes' array, or None) gives the multigrid
-    a Galerkin correction first, except under a named CG (the correction is not symmetric).
+    a Galerkin correction first, except under a named CG (the correction is not symmetric); `soften` (a
+    context, System.softened) is where BoomerAMG is set up (the multigrid must be hypre).
 
     When the options name no KSP, it becomes GMRES (right-preconditioned, as the true-residual test
     needs) with the multiplicative composite, one V-cycle per iteration; a named CG gets the
@@ -326,7 +335,7 @@ def install_band_pc(ksp, band, comm, coarse=None):
     remove_options(added)               # BoomerAMG has read them
     parts = Parts()
     slip = SlipCorrection(coarse) if coarse and krylov != "cg" else None
-    pc.getCompositePC(0).setPythonContext(MultigridPart(amg, parts))
+    pc.getCompositePC(0).setPythonContext(MultigridPart(amg, parts, soften))
     pc.getCompositePC(1).setPythonContext(BandSolve(band, comm, parts, slip))
     ksp.setPC(pc)
     return comm.allreduce(len(band)), parts

@@ -11,7 +11,7 @@ import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from . import __version__, assembly, elasticity, lattice, options
+from . import __version__, assembly, elasticity, lattice, options, preconditioner
 from .errors import QscError, SceneError
 from .mesh import distribute_mesh, on_root
 from .output import ResultWriter, write_json
@@ -139,9 +139,13 @@ class Run:
             surfaces = sorted({name for pair in scene.contact for name in (pair.slave, pair.master)})
             slip = (assembly.slip_modes(mesh, u, surfaces, self.bc_dofs)
                     if surfaces and scene.solver.contact_slip_modes else None)
+            soft = scene.solver.contact_multigrid_alpha
+            if soft is not None and scene.contact and preconditioner.amg_type() != "hypre":
+                raise SceneError(f"solver.contact_multigrid_alpha: softens the interface for BoomerAMG only, and "
+                                 f"pc_type is {preconditioner.amg_type()!r}")
             self.system = System(K, self.f_ext, self.bc_dofs, bc_values, nullspace, comm,
                                  scene.solver.max_active_set_iterations, scene.solver.contact_preconditioner,
-                                 scene.solver.contact_band_layers, slip)
+                                 scene.solver.contact_band_layers, slip, soft)
             self.n_constrained = comm.allreduce(len(self.bc_dofs), op=MPI.SUM)
             self.restraint = Restraint(mesh, self.bc_dofs, u)
             self.system.free_motions = lambda terms, active: describe(self.restraint.free(terms, active))

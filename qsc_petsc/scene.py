@@ -523,6 +523,12 @@ SCHEMA = Table({
                                          default="auto"),
         "contact_band_layers": Int("Rings of element neighbours added to the contact rows' dofs in the band.",
                                    ge=0, le=5, default=1),
+        "contact_multigrid_alpha": Float(
+            "Dimensionless penalty of the contact pairs in the operator BoomerAMG's coarse spaces are built from "
+            "(the Krylov method and the band's solve keep the pairs' own); absent: the pairs' own. 1 builds them "
+            "as if the interface were as stiff as the elements beside it: for large contacts between bodies held "
+            "elsewhere (two cubes between dies, 212k dofs: 64 -> 40 Krylov iterations), not small ones (Hertz: "
+            "334 -> 461).", gt=0, default=None),
         "contact_slip_modes": Bool("With the band preconditioner (unless ksp_type is cg): a Galerkin correction "
                                    "on each contact body's rigid motions, faded from its contact surface to its "
                                    "far side, which the multigrid leaves to the Krylov method (frictionless "

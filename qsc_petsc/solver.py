@@ -8,6 +8,7 @@ converges when the active set stops changing and the residual (or the step) is s
 
 import hashlib
 import time
+from contextlib import contextmanager
 
 import numpy as np
 from mpi4py import MPI
@@ -50,6 +51,7 @@ class ConstraintTerm:
         self.name, self.G, self.g, self.W, self.phi, self.eps_n = name, G, g, W, phi, eps_n
         # node_local: every row acts on one node's dofs (a die), so G^T D G lies inside K's 3 x 3 node blocks
         self.node_local = node_local
+        self.alpha = None          # a contact pair's dimensionless penalty (model.py sets it; dies: None)
         # G scaled by the rows' stiffnesses and G^T diag(d) G, kept so that each Jacobian redoes only the
         # product's numeric part (System._jacobian)
         self.DG = self.product = None
@@ -123,7 +125,7 @@ class System:
     """K0 u - t b + sum_terms G^T m with Dirichlet rows u_i - t ubar_i, solved by SNES."""
 
     def __init__(self, K, f_ext, bc_dofs, bc_values, nullspace, comm, max_it=50, contact_pc="auto", band_layers=1,
-                 slip_modes=None):
+                 slip_modes=None, multigrid_alpha=None):
         self.comm = comm
         # kept for _all_failed alone: no other collective ever runs on it, whatever the ranks were doing
         self.agree_comm = comm.Dup()
@@ -131,6 +133,8 @@ class System:
         self.contact_pc, self.band_layers, self.band_dofs = contact_pc, band_layers, 0
         # the band preconditioner's coarse space (assembly.slip_modes: blocks of modes on owned dofs) or None
         self.slip_modes = slip_modes
+        # the contact pairs' dimensionless penalty in the operator BoomerAMG is set up on (None: their own)
+        self.multigrid_alpha = multigrid_alpha
         self.u = K.createVecRight()
         self.u.set(0.0)
         ubar = self.u.duplicate()
@@ -266,8 +270,9 @@ class System:
             same = kept and self.band is not None and self.comm.allreduce(np.array_equal(band, self.band),
                                                                            op=MPI.LAND)
             if not same:
-                self.band_dofs, self.band_parts = preconditioner.install_band_pc(self.snes.getKSP(), band,
-                                                                                 self.comm, self.slip_modes)
+                self.band_dofs, self.band_parts = preconditioner.install_band_pc(
+                    self.snes.getKSP(), band, self.comm, self.slip_modes,
+                    self.softened if self.multigrid_alpha is not None else None)
                 self.band, self.pc_rows = band, None
             # the first Jacobian may keep the preconditioner as it is (_keep_or_rebuild_pc)
             self.pc_candidate = same and not same_rows
@@ -320,6 +325,31 @@ class System:
             Jc.zeroRowsColumns(self.bc_dofs, 0.0)
             J.axpy(1.0, Jc, SUBSET)
         self.jacobian_d = [term.d.copy() for term in self.terms]
+
+    @contextmanager
+    def softened(self, P):
+        """P (the Jacobian) with each contact pair's rows at the penalty multigrid_alpha instead of the pair's
+        own while the block is open, then P as it was: P += (s - 1) G^T diag(d) G per pair, s = multigrid_alpha /
+        alpha, d the stiffnesses P holds, held dofs left out, and taken off again after (collective). BoomerAMG
+        copies the operator at its setup, so only its coarse spaces and smoothers see the softer interface. P's
+        object state is put back too: its values are its own again (to round-off), and a changed state would
+        make every PC on it set itself up anew at the next solve."""
+        parts = []
+        for term, d in zip(self.terms, self.jacobian_d or []):
+            if term.node_local or term.alpha is None or term.alpha <= self.multigrid_alpha:
+                continue
+            C = term.jacobian(d)
+            C.zeroRowsColumns(self.bc_dofs, 0.0)
+            parts.append((self.multigrid_alpha / term.alpha - 1.0, C))
+        state = P.stateGet()
+        for factor, C in parts:
+            P.axpy(factor, C, SUBSET)
+        try:
+            yield
+        finally:
+            for factor, C in parts:
+                P.axpy(-factor, C, SUBSET)
+            P.stateSet(state)
 
     def _reset_to_stiffness(self, J):
         """J's values set to K's, its pattern (K's and the contact stencil's) kept."""

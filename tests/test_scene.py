@@ -80,7 +80,8 @@ def test_defaults_are_filled_in():
     assert scene.load.steps == 1
     assert scene.solver.to_dict() == {"max_cutbacks": 4, "max_active_set_iterations": 60, "active_set_tolerance": 1e-12,
                                       "predictor": "extrapolate", "contact_preconditioner": "auto",
-                                      "contact_band_layers": 1, "contact_slip_modes": True}
+                                      "contact_band_layers": 1, "contact_multigrid_alpha": None,
+                                      "contact_slip_modes": True}
     assert scene.petsc == {"ksp_rtol": "1e-10"}
     assert scene.output.to_dict() == {"directory": "results/cubes", "xdmf": True}
 

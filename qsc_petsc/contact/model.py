@@ -276,6 +276,7 @@ class ContactModel:
                         rows = row_builders.quasi_symmetric(sp, mp, weight)
                 term = self._term(name, rows, pd["eps_n"], pd["h_eff"], spec.enforcement == "augmented_lagrangian")
                 term.points = points
+                term.alpha = spec.penalty
                 out.append(term)
         for dd in self.dies:
             spec = dd["spec"]
