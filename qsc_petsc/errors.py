@@ -21,14 +21,15 @@ class ConvergenceError(QscError):
 
 def petsc_detail(exc):
     """PETSc's own account of a PETSc.Error, from the traceback its text carries: the innermost routine and the
-    specific message, e.g. "KSPSetType(): Unable to find requested KSP type nonexist"; "" if it has none.
+    specific message, e.g. "KSPSetType(): Unable to find requested KSP type nonexist"; "a routine PETSc did not
+    name" if the text carries no traceback.
 
     petsc4py keeps PETSc's error message in the exception instead of printing it, so a user sees it only if
     qsc's line quotes it."""
     lines = [re.sub(r"^\[\d+\]\s*", "", line) for line in str(exc).splitlines()[1:]]
     routines = [i for i, line in enumerate(lines) if re.match(r"^\S+\(\) at ", line)]
     if not routines:
-        return ""
+        return "a routine PETSc did not name"
     last = routines[-1]
     message = [line for line in lines[last + 1:] if line.strip()]
     # the first line is the error class's generic text ("Error in external library"), the rest the specifics

@@ -441,3 +441,22 @@ def test_bad_band_option_ends_every_rank_with_exit_2(tmp_path, case):
     assert "Traceback" not in out and "SEGV" not in out, out
     errors = [line for line in own_lines(out) if line.startswith("qsc: error: ")]
     assert len(errors) == 1 and errors[0].startswith(expected) and quoted in errors[0], out
+
+
+def test_petsc_detail_quotes_the_innermost_routine_and_its_specifics():
+    """errors.petsc_detail reads petsc4py's error text: the deepest routine and the lines after PETSc's generic one."""
+    from qsc_petsc.errors import petsc_detail
+
+    class Fake(Exception):
+        def __init__(self, text):
+            self.text = text
+
+        def __str__(self):
+            return self.text
+
+    text = ("error code 76\n[0] SNESSolve() at snes.c:4692\n[0] PCSetUp_HYPRE() at hypre.c:419\n"
+            "[0] Error in external library\n[0] Error in jac->setup(): error code 12")
+    assert petsc_detail(Fake(text)) == "PCSetUp_HYPRE(): Error in jac->setup(): error code 12"
+    assert petsc_detail(Fake("error code 55\n[1] MatMult() at matrix.c:2\n[1] Out of memory")) == \
+        "MatMult(): Out of memory"
+    assert petsc_detail(Fake("error code 76")) == "a routine PETSc did not name"
