@@ -528,7 +528,8 @@ SCHEMA = Table({
             "(the Krylov method and the band's solve keep the pairs' own); absent: the pairs' own. 1 builds them "
             "as if the interface were as stiff as the elements beside it: for large contacts between bodies held "
             "elsewhere (two cubes between dies, 212k dofs: 64 -> 40 Krylov iterations), not small ones (Hertz: "
-            "334 -> 461).", gt=0, default=None),
+            "334 -> 461). At most 1e4 times softer than a pair's own; pairs above alpha 1e6 keep theirs.",
+            gt=0, default=None),
         "contact_slip_modes": Bool("With the band preconditioner (unless ksp_type is cg): a Galerkin correction "
                                    "on each contact body's rigid motions, faded from its contact surface to its "
                                    "far side, which the multigrid leaves to the Krylov method (frictionless "

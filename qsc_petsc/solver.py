@@ -30,6 +30,13 @@ MUMPS_MAX_RELAXATION = 1000    # percent
 KSP_MAX_IT = 2000              # Krylov iterations per linear solve unless -qsc_ksp_max_it says otherwise
 START_TOUCHING, START_REACH = "touching", "reach"   # ConstraintTerm.start: an increment's first closed set
 DAMPING_HALVINGS = 8           # smallest damped Newton step 1/2^7 (System._damp)
+# System.softened: the multigrid's contact rows are at most this much softer than the pair's own. Softer, its
+# corrections at the interface outgrew what the band's solve puts right: two cubes (70k dofs), alpha 1e6 with
+# contact_multigrid_alpha 1 (1e-6) stopped at 2000 Krylov iterations; at 1e-4 (alpha_mg 100) 55 against 61.
+# Pairs stiffer than SOFTENED_UP_TO keep their own penalty: at alpha 1e8 the second increment stopped at 2000
+# iterations with 1e-4 and took 176 against 70 with 1e-3
+SOFTEST = 1e-4
+SOFTENED_UP_TO = 1e6
 KRYLOV_MARGIN = 0.1            # the Krylov residual's stop below the Newton target (System._match_krylov_to_newton)
 # round-off floor (System._converged): a Newton step taken with the final active set that did not halve the
 # residual, which is within FLOOR_SPAN of the target, ends the solve (the linear solves cannot go lower)
@@ -329,18 +336,19 @@ class System:
     @contextmanager
     def softened(self, P):
         """P (the Jacobian) with each contact pair's rows at the penalty multigrid_alpha instead of the pair's
-        own while the block is open, then P as it was: P += (s - 1) G^T diag(d) G per pair, s = multigrid_alpha /
-        alpha, d the stiffnesses P holds, held dofs left out, and taken off again after (collective). BoomerAMG
+        own while the block is open, then P as it was: P += (s - 1) G^T diag(d) G per pair with alpha up to
+        SOFTENED_UP_TO, s = max(multigrid_alpha / alpha, SOFTEST), d the stiffnesses P holds, held dofs left out, and taken off again after (collective). BoomerAMG
         copies the operator at its setup, so only its coarse spaces and smoothers see the softer interface. P's
         object state is put back too: its values are its own again (to round-off), and a changed state would
         make every PC on it set itself up anew at the next solve."""
         parts = []
         for term, d in zip(self.terms, self.jacobian_d or []):
-            if term.node_local or term.alpha is None or term.alpha <= self.multigrid_alpha:
+            if (term.node_local or term.alpha is None or term.alpha <= self.multigrid_alpha
+                    or term.alpha > SOFTENED_UP_TO):
                 continue
             C = term.jacobian(d)
             C.zeroRowsColumns(self.bc_dofs, 0.0)
-            parts.append((self.multigrid_alpha / term.alpha - 1.0, C))
+            parts.append((max(self.multigrid_alpha / term.alpha, SOFTEST) - 1.0, C))
         state = P.stateGet()
         for factor, C in parts:
             P.axpy(factor, C, SUBSET)

@@ -218,3 +218,28 @@ def test_softened_multigrid_needs_boomeramg(comm, mpi_tmp):
     scene = load_scene(_two_cubes(comm, mpi_tmp), ["solver.contact_multigrid_alpha=1", "petsc.pc_type=gamg"])
     with pytest.raises(SceneError, match=r"solver.contact_multigrid_alpha: .*'gamg'"):
         Run(scene, comm, mpi_tmp / "out", log=lambda *a: None)
+
+
+def test_softening_is_bounded(comm, mpi_tmp):
+    """The multigrid's rows are at most SOFTEST times the pair's own (alpha 1e6, key 1: 1e-4, not 1e-6), and a
+    pair above SOFTENED_UP_TO (alpha 1e8) keeps its own: softer, the linear solves stopped at 2000 iterations."""
+    from qsc_petsc.run import Run
+    from qsc_petsc.scene import load_scene
+    from qsc_petsc.solver import SOFTEST
+    for alpha, expected in ((1e6, SOFTEST - 1.0), (1e8, 0.0)):
+        run = Run(load_scene(_two_cubes(comm, mpi_tmp), ["output.xdmf=false", "solver.contact_multigrid_alpha=1",
+                                                         f"contact.0.penalty={alpha}"]),
+                  comm, mpi_tmp / f"out_{alpha}", log=lambda *a: None)
+        assert run.execute()["status"] == "ok"
+        J = run.system.J
+        before = J.copy()
+        with run.system.softened(J):
+            change = J.copy()
+            change.axpy(-1.0, before)
+        k = next(k for k, term in enumerate(run.system.terms) if not term.node_local)
+        C = run.system.terms[k].jacobian(run.system.jacobian_d[k])
+        change.axpy(-expected, C, structure=change.Structure.DIFFERENT_NONZERO_PATTERN)
+        assert change.norm() <= 1e-12 * C.norm(), alpha
+        for mat in (before, change):
+            mat.destroy()
+        run.destroy()
