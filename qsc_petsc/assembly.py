@@ -540,7 +540,7 @@ def slip_modes(mesh, template, surfaces, held_dofs):
     owned_v = np.flatnonzero(mesh.owned)
     r0, r1 = template.getOwnershipRange()
     rows = (3 * mesh.gvert[owned_v] - r0).astype(np.int64)
-    weights = {}
+    weights, in_body = {}, {}          # per body: w on this rank's owned vertices, and which of them are its
     for name in surfaces:
         v = mesh.surface_vertices(name)
         x = mesh.coords[v[mesh.owned[v]]]
@@ -549,19 +549,19 @@ def slip_modes(mesh, template, surfaces, held_dofs):
         normal = np.linalg.eigh(comm.allreduce((x - centre).T @ (x - centre)))[1][:, 0]
         cells = mesh.surface_faces(name)[0]
         body = comm.allreduce(int(mesh.cell_body[cells[0]]) if len(cells) else -1, op=MPI.MAX)
-        in_body = mesh.body_mask(body)[owned_v]
+        if body not in in_body:
+            in_body[body] = mesh.body_mask(body)[owned_v]
         d = np.abs((mesh.coords[owned_v] - centre) @ normal)
-        far = comm.allreduce(float(d[in_body].max(initial=0.0)), op=MPI.MAX)
-        w = np.where(in_body, np.clip(1.0 - d / far, 0.0, 1.0) if far > 0 else 1.0, 0.0)
+        far = comm.allreduce(float(d[in_body[body]].max(initial=0.0)), op=MPI.MAX)
+        w = np.where(in_body[body], np.clip(1.0 - d / far, 0.0, 1.0) if far > 0 else 1.0, 0.0)
         weights[body] = np.maximum(weights.get(body, 0.0), w)
     held = np.zeros(r1 - r0, dtype=bool)
     held[np.asarray(held_dofs, dtype=np.int64) - r0] = True
     blocks = []
     for body in sorted(weights):
-        in_body = mesh.body_mask(body)[owned_v]
-        w = weights[body][in_body]
-        fields = _rigid_fields(comm, mesh.coords[owned_v[in_body]]) * w[None, :, None]
-        cols = (rows[in_body][:, None] + np.arange(3)).ravel()
+        mine = in_body[body]
+        fields = _rigid_fields(comm, mesh.coords[owned_v[mine]]) * weights[body][mine][None, :, None]
+        cols = (rows[mine][:, None] + np.arange(3)).ravel()
         values = fields.reshape(6, -1)
         values[:, held[cols]] = 0.0
         order = np.argsort(cols)

@@ -303,9 +303,9 @@ def wants_band(mode, has_pairs):
 
 def install_band_pc(ksp, band, comm, coarse=None, soften=None):
     """Give ksp a fresh composite PC: the multigrid, then the exact solve on the contact band (BandSolve), whose
-    dofs (this rank's, from band_dofs) are `band`; `coarse` (slip_modes' array, or None) gives the multigrid
-    a Galerkin correction first, except under a named CG (the correction is not symmetric); `soften` (a
-    context, System.softened) is where BoomerAMG is set up (the multigrid must be hypre).
+    dofs (this rank's, from band_dofs) are `band`; `coarse` (assembly.slip_modes' blocks, or None) gives the
+    band's solve a Galerkin correction first (SlipCorrection), except under a named CG (the correction is not
+    symmetric); `soften` (a context, System.softened) is where BoomerAMG is set up (the multigrid must be hypre).
 
     When the options name no KSP, it becomes GMRES (right-preconditioned, as the true-residual test
     needs) with the multiplicative composite, one V-cycle per iteration; a named CG gets the

@@ -54,11 +54,12 @@ PETSC_ERRORS = {55: "out of memory", 56: "an operation the matrix or solver type
 class ConstraintTerm:
     """One set of penalised constraint rows C = G u - g with weights W (a contact pair or a die)."""
 
-    def __init__(self, name, G, g, W, phi, eps_n, closed_tol, gate_of=None, augmented=False, node_local=False):
+    def __init__(self, name, G, g, W, phi, eps_n, closed_tol, gate_of=None, augmented=False, node_local=False,
+                 alpha=None):
         self.name, self.G, self.g, self.W, self.phi, self.eps_n = name, G, g, W, phi, eps_n
         # node_local: every row acts on one node's dofs (a die), so G^T D G lies inside K's 3 x 3 node blocks
         self.node_local = node_local
-        self.alpha = None          # a contact pair's dimensionless penalty (model.py sets it; dies: None)
+        self.alpha = alpha         # a contact pair's dimensionless penalty (dies: None)
         # G scaled by the rows' stiffnesses and G^T diag(d) G, kept so that each Jacobian redoes only the
         # product's numeric part (System._jacobian)
         self.DG = self.product = None
@@ -336,11 +337,12 @@ class System:
     @contextmanager
     def softened(self, P):
         """P (the Jacobian) with each contact pair's rows at the penalty multigrid_alpha instead of the pair's
-        own while the block is open, then P as it was: P += (s - 1) G^T diag(d) G per pair with alpha up to
-        SOFTENED_UP_TO, s = max(multigrid_alpha / alpha, SOFTEST), d the stiffnesses P holds, held dofs left out, and taken off again after (collective). BoomerAMG
-        copies the operator at its setup, so only its coarse spaces and smoothers see the softer interface. P's
-        object state is put back too: its values are its own again (to round-off), and a changed state would
-        make every PC on it set itself up anew at the next solve."""
+        own while the block is open, then P as it was (collective): P += (s - 1) G^T diag(d) G per pair with
+        alpha up to SOFTENED_UP_TO, s = max(multigrid_alpha / alpha, SOFTEST), d the stiffnesses P holds, held
+        dofs left out, and taken off again after. BoomerAMG copies the operator at its setup, so only its
+        coarse spaces and smoothers see the softer interface. P's object state is put back too: its values
+        are its own again (to round-off), and a changed state would make every PC on it set itself up anew at
+        the next solve."""
         parts = []
         for term, d in zip(self.terms, self.jacobian_d or []):
             if (term.node_local or term.alpha is None or term.alpha <= self.multigrid_alpha

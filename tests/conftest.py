@@ -39,11 +39,14 @@ def run_scene(scene_path, out, overrides=(), comm=MPI.COMM_WORLD, log=None):
     return run, summary
 
 
-def scene_without_petsc(folder, petsc=""):
-    """configs/two_cubes_dies.toml with its [petsc] table (MUMPS) replaced by `petsc`: the defaults if empty."""
-    text = (CONFIGS / "two_cubes_dies.toml").read_text()
+def scene_without_petsc(folder, petsc="", comm=MPI.COMM_WORLD):
+    """configs/two_cubes_dies.toml with its [petsc] table (MUMPS) replaced by `petsc`: the defaults if empty.
+    Written by rank 0 into a folder all ranks share; every rank calls it."""
     path = folder / "scene.toml"
-    path.write_text(text[:text.index("[petsc]")] + (f"[petsc]\n{petsc}\n" if petsc else ""))
+    if comm.rank == 0:
+        text = (CONFIGS / "two_cubes_dies.toml").read_text()
+        path.write_text(text[:text.index("[petsc]")] + (f"[petsc]\n{petsc}\n" if petsc else ""))
+    comm.Barrier()
     return path
 
 

@@ -220,7 +220,7 @@ class ContactModel:
         from contextlib import nullcontext
         return self.phases(name) if self.phases else nullcontext()
 
-    def _term(self, name, rows, eps_n, h, augmented, node_local=False):
+    def _term(self, name, rows, eps_n, h, augmented, node_local=False, alpha=None):
         mesh = self.mesh
         G = assembly.triplet_matrix(mesh, rows.G_rows, rows.G_cols, rows.G_vals)
         g = assembly.row_vector(mesh, rows.g_rows, rows.g_vals, self.template)
@@ -232,7 +232,7 @@ class ContactModel:
         gate = None
         if len(rows.gate_rows):
             gate = gate_positions(np.flatnonzero(exists) + r0, rows.gate_rows, rows.gate_of)
-        return ConstraintTerm(name, G, g, W, rows.phi, eps_n, closed, gate, augmented, node_local)
+        return ConstraintTerm(name, G, g, W, rows.phi, eps_n, closed, gate, augmented, node_local, alpha)
 
     def terms(self, u, t):
         """New search at the current displacement u, load factor t: one ConstraintTerm per pair and die; a pair
@@ -274,9 +274,9 @@ class ContactModel:
                                                                          move=self._to_row_owners)
                     else:
                         rows = row_builders.quasi_symmetric(sp, mp, weight)
-                term = self._term(name, rows, pd["eps_n"], pd["h_eff"], spec.enforcement == "augmented_lagrangian")
+                term = self._term(name, rows, pd["eps_n"], pd["h_eff"], spec.enforcement == "augmented_lagrangian",
+                                  alpha=spec.penalty)
                 term.points = points
-                term.alpha = spec.penalty
                 out.append(term)
         for dd in self.dies:
             spec = dd["spec"]

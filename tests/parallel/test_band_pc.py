@@ -3,7 +3,7 @@ iterations with CG + GAMG or BoomerAMG, on 1, 2 and 3 ranks (interface split acr
 
 import numpy as np
 import pytest
-from conftest import CONFIGS, all_close
+from conftest import CONFIGS, all_close, scene_without_petsc
 
 MESHES = ["petsc.ksp_rtol=1e-10", "output.xdmf=false", "bodies.0.mesh.cells=[4,4,2]", "bodies.1.mesh.cells=[7,7,2]"]
 ITERATIVE = ["petsc.ksp_type=cg", *MESHES]
@@ -102,24 +102,13 @@ def test_band_is_one_solve_across_ranks(comm, mpi_tmp):
     run.destroy()
 
 
-def _two_cubes(comm, folder):
-    """configs/two_cubes_dies.toml with the iterative defaults (no [petsc] table), written by rank 0."""
-    path = folder / "two_cubes.toml"
-    if comm.rank == 0:
-        folder.mkdir(parents=True, exist_ok=True)
-        text = (CONFIGS / "two_cubes_dies.toml").read_text()
-        path.write_text(text[:text.index("[petsc]")])
-    comm.Barrier()
-    return path
-
-
 def test_slip_modes_are_rigid_motions_faded_towards_the_far_side(comm, mpi_tmp):
     """assembly.slip_modes on the two cubes: per body 6 rows; a translation is w = 1 - d / D on its body's
     vertices (d from the contact plane z = 1, D = 1) and 0 on the other body: its global sum of squares is
     (nx + 1)(ny + 1) sum_k (k / nz)^2, whatever the ranks; the twist about the normal is orthogonal to it."""
     from qsc_petsc.run import Run
     from qsc_petsc.scene import load_scene
-    run = Run(load_scene(_two_cubes(comm, mpi_tmp), ["output.xdmf=false"]), comm, mpi_tmp / "out",
+    run = Run(load_scene(scene_without_petsc(mpi_tmp), ["output.xdmf=false"]), comm, mpi_tmp / "out",
               log=lambda *a: None)
     blocks = run.system.slip_modes
     assert len(blocks) == 2 and all(values.shape == (6, len(cols)) for cols, values in blocks)
@@ -140,7 +129,7 @@ def test_slip_modes_cut_the_krylov_count_same_answer(comm, mpi_tmp):
     the Galerkin correction on the slip modes gives the same answer in fewer Krylov iterations (6/9 cells, 1
     rank, measured with 6^3: 34 against 43; with 4^3: 34 against 42). The lower cube has 4^3 cells here, so that on 2 and 3 ranks the cut runs
     through the upper one and a rank holds none of the lower body's dofs."""
-    path = _two_cubes(comm, mpi_tmp)
+    path = scene_without_petsc(mpi_tmp)
     results = {}
     for slip in (True, False):
         s, _, q = solve(comm, mpi_tmp / f"slip_{slip}", [f"solver.contact_slip_modes={str(slip).lower()}"], path,
@@ -157,7 +146,7 @@ def test_slip_modes_only_where_the_preconditioner_may_be_unsymmetric(comm, mpi_t
     without it."""
     from qsc_petsc.run import Run
     from qsc_petsc.scene import load_scene
-    run = Run(load_scene(_two_cubes(comm, mpi_tmp), ["output.xdmf=false", f"petsc.ksp_type={krylov}"]), comm,
+    run = Run(load_scene(scene_without_petsc(mpi_tmp), ["output.xdmf=false", f"petsc.ksp_type={krylov}"]), comm,
               mpi_tmp / "out", log=lambda *a: None)
     assert run.execute()["status"] == "ok"
     band = run.system.snes.getKSP().getPC().getCompositePC(1).getPythonContext()
@@ -169,7 +158,7 @@ def test_softened_multigrid_same_answer_fewer_iterations(comm, mpi_tmp):
     """solver.contact_multigrid_alpha = 1: BoomerAMG is set up with the pair's rows at alpha 1 (the Krylov method
     and the band's solve keep alpha 1e4): the same answer in fewer Krylov iterations on the two cubes (8^3 / 12^3
     cells, 1 rank, measured: 32 against 40)."""
-    path = _two_cubes(comm, mpi_tmp)
+    path = scene_without_petsc(mpi_tmp)
     mesh = ["output.xdmf=false", "bodies.0.mesh.cells=[8,8,8]", "bodies.1.mesh.cells=[12,12,12]"]
     results = {}
     for alpha in (None, 1.0):
@@ -188,7 +177,7 @@ def test_softened_operator_is_put_back(comm, mpi_tmp):
 
     from qsc_petsc.run import Run
     from qsc_petsc.scene import load_scene
-    run = Run(load_scene(_two_cubes(comm, mpi_tmp), ["output.xdmf=false", "solver.contact_multigrid_alpha=1"]),
+    run = Run(load_scene(scene_without_petsc(mpi_tmp), ["output.xdmf=false", "solver.contact_multigrid_alpha=1"]),
               comm, mpi_tmp / "out", log=lambda *a: None)
     assert run.execute()["status"] == "ok"
     J = run.system.J
@@ -215,7 +204,7 @@ def test_softened_multigrid_needs_boomeramg(comm, mpi_tmp):
     from qsc_petsc.errors import SceneError
     from qsc_petsc.run import Run
     from qsc_petsc.scene import load_scene
-    scene = load_scene(_two_cubes(comm, mpi_tmp), ["solver.contact_multigrid_alpha=1", "petsc.pc_type=gamg"])
+    scene = load_scene(scene_without_petsc(mpi_tmp), ["solver.contact_multigrid_alpha=1", "petsc.pc_type=gamg"])
     with pytest.raises(SceneError, match=r"solver.contact_multigrid_alpha: .*'gamg'"):
         Run(scene, comm, mpi_tmp / "out", log=lambda *a: None)
 
@@ -227,7 +216,7 @@ def test_softening_is_bounded(comm, mpi_tmp):
     from qsc_petsc.scene import load_scene
     from qsc_petsc.solver import SOFTEST
     for alpha, expected in ((1e6, SOFTEST - 1.0), (1e8, 0.0)):
-        run = Run(load_scene(_two_cubes(comm, mpi_tmp), ["output.xdmf=false", "solver.contact_multigrid_alpha=1",
+        run = Run(load_scene(scene_without_petsc(mpi_tmp), ["output.xdmf=false", "solver.contact_multigrid_alpha=1",
                                                          f"contact.0.penalty={alpha}"]),
                   comm, mpi_tmp / f"out_{alpha}", log=lambda *a: None)
         assert run.execute()["status"] == "ok"
