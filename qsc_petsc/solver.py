@@ -32,9 +32,9 @@ START_TOUCHING, START_REACH = "touching", "reach"   # ConstraintTerm.start: an i
 DAMPING_HALVINGS = 8           # smallest damped Newton step 1/2^7 (System._damp)
 # System.softened: the multigrid's contact rows are at most this much softer than the pair's own. Softer, its
 # corrections at the interface outgrew what the band's solve puts right: two cubes (70k dofs), alpha 1e6 with
-# contact_multigrid_alpha 1 (1e-6) stopped at 2000 Krylov iterations; at 1e-4 (alpha_mg 100) 55 against 61.
+# contact_multigrid_alpha 1 (1e-6) stopped at 2000 Krylov iterations; at 1e-4 (alpha_mg 100) 55-56 against 61.
 # Pairs stiffer than SOFTENED_UP_TO keep their own penalty: at alpha 1e8 the second increment stopped at 2000
-# iterations with 1e-4 and took 176 against 70 with 1e-3
+# iterations with 1e-4, and with 1e-3 the run took 219 (43 + 176) against 70
 SOFTEST = 1e-4
 SOFTENED_UP_TO = 1e6
 KRYLOV_MARGIN = 0.1            # the Krylov residual's stop below the Newton target (System._match_krylov_to_newton)
