@@ -49,3 +49,18 @@ def test_check_reports_what_will_be_modelled(comm):
         assert "49 candidate rows at the start" in quarter      # 7 x 7 slave nodes of the quarter's 6 x 6 faces
         assert "169 candidate rows at the start" in text["full"]   # 13 x 13 of the full 12 x 12
         assert "8778 dofs" in text["full"] and 4 * 2586 < 1.2 * 8778
+
+
+@pytest.mark.parametrize("name, cells, condition, area", [("two_cubes_full.toml", FULL, "sticking", 1.0),
+                                                         ("two_cubes_quarter.toml", QUARTER, "frictionless", 0.25)])
+def test_die_contact_area_is_the_pressed_face(comm, mpi_tmp, name, cells, condition, area):
+    """A die pressing a whole face reports that face's area, sticking or not (a sticking die's two tangential
+    rows per node once counted the node's area again: 3 m^2 for a unit face). The quarter's symmetry planes
+    hold what frictionless dies leave free."""
+    sets = cells + ["output.xdmf=false"] + [f"die.{i}.condition={condition}" for i in (0, 1)]
+    run, summary = run_scene(CONFIGS / name, mpi_tmp, sets, comm)
+    run.destroy()
+    assert summary["status"] == "ok"
+    contact = summary["steps"][-1]["contact"]
+    for die in ("die[0] bottom", "die[1] top"):
+        assert contact[die]["contact_area"] == pytest.approx(area, rel=1e-12)

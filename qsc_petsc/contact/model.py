@@ -377,12 +377,14 @@ class ContactModel:
             penetration[v, 0] = h
             status[v, 0] = (h >= -self.scene.solver.active_set_tolerance * dd["h"]).astype(float)
             traction[v, 0] = (F[_owned_rows(mesh, v)] @ -n) / dd["area"]
+            # a node's area once: a sticking die's tangential rows (gated by its normal row) carry it too
+            normal = term.active & (term.gate_of < 0 if term.gate_of is not None else True)
             summaries[f"die[{dd['index']}] {spec.name}"] = {
                 "rows": self.comm.allreduce(len(term.rows), op=MPI.SUM),
                 "active_rows": self.comm.allreduce(int(term.active.sum()), op=MPI.SUM),
                 "eps_n": dd["eps_n"], "force_on_bodies": force.tolist(),
                 "max_penetration": self.comm.allreduce(float(h.max(initial=-np.inf)), op=MPI.MAX),
-                "contact_area": self.comm.allreduce(float(term.W.getArray()[term.rows][term.active].sum()),
+                "contact_area": self.comm.allreduce(float(term.W.getArray()[term.rows][normal].sum()),
                                                     op=MPI.SUM)}
         fields = {"contact_traction": traction, "contact_penetration": penetration, "contact_status": status}
         return fields, summaries
