@@ -83,15 +83,21 @@ class ConstraintTerm:
         # first iteration of an increment (formulation.md section 4, zero-gap start): START_TOUCHING closes
         # the rows that touch or penetrate at the start (c >= -closed_tol), START_REACH every row within
         # reach; either way with force of either sign, so the first Newton step solves that glued problem
-        # and the semi-smooth iterations open what must open. System.solve_at picks the mode.
+        # and the semi-smooth iterations open what must open. System.solve_at picks the mode. held_closed (per
+        # existing row, or None): rows the last converged increment ended closed, which START_TOUCHING closes too
         self.start = None
+        self.held_closed = None
 
     def evaluate(self, u):
         """Row values, multipliers and active set at u (collective)."""
         self.G.mult(u, self.c)
         self.c.axpy(-1.0, self.g)
         c = self.c.getArray()[self.rows]
-        tol = np.full(len(c), np.inf) if self.start == START_REACH else self.closed_tol
+        tol = self.closed_tol
+        if self.start == START_REACH:
+            tol = np.full(len(c), np.inf)
+        elif self.start == START_TOUCHING and self.held_closed is not None:
+            tol = np.where(self.held_closed, np.inf, tol)
         self.energy, m, self.d, self.active = row_response(
             c, self.W.getArray()[self.rows], self.eps_n, self.phi, tol, self.lmbda, self.gate_of,
             self.start is not None)
@@ -201,6 +207,9 @@ class System:
         # the Krylov stop follows the Newton test (KSP atol = KRYLOV_MARGIN x SNES target) unless the user set one
         self.ksp_atol_auto = options.option_value("ksp_atol") is None
         self.mumps_relaxation = None   # MUMPS ICNTL(14) [%] once raised after a workspace failure
+        # per term name: which of this rank's rows (G's local row range, 3 per owned node: the same at every
+        # search) the last converged solve ended closed; the next increment starts with them closed
+        self.closed_rows = {}
 
         self.snes = PETSc.SNES().create(comm=comm)
         self.snes.setOptionsPrefix("qsc_")
@@ -567,6 +576,12 @@ class System:
             "round_off_floor": self.floor,     # the relative residual it stopped at on the floor, or None
             "jacobian_assemblies": self.jacobian_rebuilds - rebuilds,   # with rows: one per new active set
         }
+        if reason > 0:
+            self.closed_rows = {}
+            for term in self.terms:
+                closed = np.zeros(term.c.getLocalSize(), dtype=bool)
+                closed[term.rows[term.active]] = True
+                self.closed_rows[term.name] = closed
         if reason <= 0 and self.free_seen:
             stats["free_motion"] = self.free_seen
         if self.mumps_relaxation is not None:
@@ -574,8 +589,15 @@ class System:
         return reason > 0, u, stats
 
     def _start_mode(self, u):
-        """The closed set an increment starts from (collective): the rows touching or penetrating at u
-        (START_TOUCHING), unless those leave a body free, then every row within reach (START_REACH).
+        """The closed set an increment starts from (collective): the rows touching or penetrating at u, and those
+        the last converged increment ended closed (START_TOUCHING), unless those leave a body free, then every
+        row within reach (START_REACH).
+
+        The ended-closed rows too: with finite sliding the new search's gaps differ at second order from the
+        ones the last increment converged to (the faces slide and tilt), and a contact pressed over its whole
+        face can find itself a micrometre apart: the stiff plate (configs/stiff_plate.toml) started its second
+        increment with 168 of its 676 rows closed and took 5 Newton steps (75 Krylov iterations); holding the
+        ended-closed rows, 2 (20).
 
         Touching first: a start that glued every row within reach made a curved contact peel the rows outside
         its zone off over tens of Newton iterations, in every increment (Hertz, fine level, two_pass: 36 + 24
@@ -587,6 +609,8 @@ class System:
         if self.free_motions is None:        # no restraint check to ask (a bare System): the start that is safe
             return START_REACH
         for term in self.terms:
+            closed = self.closed_rows.get(term.name)
+            term.held_closed = closed[term.rows] if closed is not None else None
             term.start = START_TOUCHING
             term.evaluate(u)
         return START_REACH if self.free_motions(self.terms, True) else START_TOUCHING
