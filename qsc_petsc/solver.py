@@ -601,7 +601,7 @@ class System:
 
         Touching first: a start that glued every row within reach made a curved contact peel the rows outside
         its zone off over tens of Newton iterations, in every increment (Hertz, fine level, two_pass: 36 + 24
-        iterations with 899 rows glued for 75 in contact; 20 + 14 from the touching rows, same answer).
+        iterations with 899 rows glued for 75 in contact; 20 + 15 from the touching rows (session 10), same answer).
         Within reach when the touching rows hold too little: a body held only by contact across a gap would
         be singular in the first Newton step."""
         if not self.terms:

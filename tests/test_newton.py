@@ -126,7 +126,7 @@ def test_no_solve_ends_in_the_closed_start(tmp_path):
 def test_increment_starts_from_the_touching_rows(tmp_path, monkeypatch):
     """A curved contact (hertz_coarse, two increments) starts each increment with the rows that touch or
     penetrate closed, not every row within reach: the same answer in fewer Newton iterations (measured
-    9 + 8 against 6 + 5 here, 36 + 24 against 20 + 14 on hertz_fine with two_pass)."""
+    9 + 8 against 6 + 4 here, 36 + 24 against 20 + 15 on hertz_fine (session 10) with two_pass)."""
     run, summary = run_scene(CONFIGS / "hertz_coarse.toml", tmp_path / "touching")
     assert all(s["closed_start"] == START_TOUCHING for s in _solves(summary))
     u = run.u.getArray().copy()
