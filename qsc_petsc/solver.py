@@ -345,11 +345,8 @@ class System:
         else:
             held = self.jacobian_d
         for i in np.flatnonzero(changed):
-            # J += G^T diag(d - d_held) G, held dofs' rows and columns left out (K's are already identity)
             term = self.terms[i]
-            Jc = term.jacobian(term.d - held[i])
-            Jc.zeroRowsColumns(self.bc_dofs, 0.0)
-            J.axpy(1.0, Jc, SUBSET)
+            J.axpy(1.0, self._jacobian_part(term, term.d - held[i]), SUBSET)      # J += G^T diag(d - d_held) G
         self.jacobian_d = [term.d.copy() for term in self.terms]
 
     @contextmanager
@@ -366,9 +363,7 @@ class System:
             if (term.node_local or term.alpha is None or term.alpha <= self.multigrid_alpha
                     or term.alpha > SOFTENED_UP_TO):
                 continue
-            C = term.jacobian(d)
-            C.zeroRowsColumns(self.bc_dofs, 0.0)
-            parts.append((max(self.multigrid_alpha / term.alpha, SOFTEST) - 1.0, C))
+            parts.append((max(self.multigrid_alpha / term.alpha, SOFTEST) - 1.0, self._jacobian_part(term, d)))
         state = P.stateGet()
         for factor, C in parts:
             P.axpy(factor, C, SUBSET)
@@ -378,6 +373,13 @@ class System:
             for factor, C in parts:
                 P.axpy(-factor, C, SUBSET)
             P.stateSet(state)
+
+    def _jacobian_part(self, term, d):
+        """G^T diag(d) G of a term as J takes it: held dofs' rows and columns left out (K's are already identity).
+        The term's own product matrix, overwritten by its next jacobian call."""
+        C = term.jacobian(d)
+        C.zeroRowsColumns(self.bc_dofs, 0.0)
+        return C
 
     def _reset_to_stiffness(self, J):
         """J's values set to K's, its pattern (K's and the contact stencil's) kept."""
