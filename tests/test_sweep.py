@@ -83,9 +83,13 @@ def test_sweep_writes_csv_table_and_plot(tmp_path, capsys, mpi_env):
     assert all(r["status"] == "ok" and r["dofs"] == "150" and int(r["newton_iterations"]) >= 1 for r in rows)
     assert rows[3]["folder"] == rows[0]["folder"]              # the reference's own combination is not run twice
     assert float(rows[0]["displacement_l2"]) == 0.0 == float(rows[3]["displacement_l2"])
-    for r in (rows[1], rows[2], rows[4]):
+    # a flat patch under uniform pressure: master_slave and two_pass both give the exact state at one penalty,
+    # so run_001 differs from the reference by rounding only (exactly 0 on some machines); the penalty shows
+    assert float(rows[1]["displacement_l2"]) < 1e-10 and float(rows[1]["max_penetration"]) < 1e-10
+    for r in (rows[2], rows[4]):
         assert 0.0 < float(r["displacement_l2"]) < 1.0
-        assert float(r["energy"]) > 0 and float(r["max_penetration"]) > 0 and r["traction"]
+        assert float(r["energy"]) > 0 and float(r["max_penetration"]) > 0.9 and r["traction"]
+    for r in (rows[1], rows[2], rows[4]):
         assert float(r["force"]) < 1e-6                          # every formulation carries the 1 N load
         assert float(r["time_solve_s"]) > 0 and float(r["peak_memory_total_mib"]) > 0
     assert sum(r["pareto"] == "yes" for r in rows) >= 1
