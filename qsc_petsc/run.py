@@ -34,6 +34,13 @@ def _destroy_live_runs():
     _LIVE_RUNS.clear()
 
 
+def _kept_rows(contact):
+    """The step line's note on finite-sliding pairs whose new search kept the last rows (reuse_tolerance)."""
+    kept = [f"{name.split()[0]} (gap change {e['gap_change']:.2g}, searched for load factor {e['rows_searched_for']:.4g})"
+            for name, e in contact.items() if e.get("rows_kept") and e.get("gap_change") is not None]
+    return "; kept the last search's rows: " + ", ".join(kept) if kept else ""
+
+
 class Phases:
     """Wall time per phase (max over ranks) and a PETSc log event per phase, for -log_view.
 
@@ -261,7 +268,7 @@ class Run:
                 last = stats["solves"][-1]
                 self.log(f"step {step}/{n_steps}: load factor {t:.4g}, {last['snes_iterations']} Newton / "
                          f"{sum(s['ksp_iterations'] for s in stats['solves'])} Krylov iterations, "
-                         f"{last['snes_reason']}")
+                         f"{last['snes_reason']}{_kept_rows(record.get('contact', {}))}")
         except QscError as exc:
             self.summary["status"] = "failed"
             self.summary["error"] = str(exc)

@@ -5,7 +5,8 @@ Writes the table into docs/performance.md. Usage:
 .venv/bin/python scripts/bench_contact.py [--cells 17 25 39] [--ranks 2]
 (cells = the lower cube's cells per direction; the upper cube has 3/2 as many, non-matching).
 A formulation "<name>+small" is that formulation with small sliding (contact[0].sliding = "small": searched once),
-"<name>+soft" with solver.contact_multigrid_alpha = 1 (BoomerAMG set up on the interface at alpha 1); both combine.
+"<name>+soft" with solver.contact_multigrid_alpha = 1 (BoomerAMG set up on the interface at alpha 1), "<name>+fresh"
+with contact[0].reuse_tolerance = 0 (finite sliding that takes every search's rows); they combine.
 """
 
 import argparse
@@ -57,10 +58,11 @@ def scene(n, formulation):
                 + DIES.format(bottom="block.zmin", top="block.zmax") + LOAD)
     m = (3 * n) // 2
     formulation, *variants = formulation.split("+")
-    unknown = set(variants) - {"small", "soft"}
+    unknown = set(variants) - {"small", "soft", "fresh"}
     if unknown:
-        raise SystemExit(f"bench_contact.py: unknown variant(s) {sorted(unknown)} (known: small, soft)")
-    pair = PAIR.format(formulation=formulation) + ('sliding = "small"\n' if "small" in variants else "")
+        raise SystemExit(f"bench_contact.py: unknown variant(s) {sorted(unknown)} (known: small, soft, fresh)")
+    pair = (PAIR.format(formulation=formulation) + ('sliding = "small"\n' if "small" in variants else "")
+            + ("reuse_tolerance = 0.0\n" if "fresh" in variants else ""))
     solver = "\n[solver]\ncontact_multigrid_alpha = 1.0\n" if "soft" in variants else ""
     return (f'name = "bench_{formulation}"\n' + BODY.format(name="lower", z0=0.0, height=1.0, n=n, nz=n)
             + BODY.format(name="upper", z0=1.0, height=1.0, n=m, nz=m)
@@ -78,7 +80,8 @@ def main():
     ap.add_argument("--ranks", type=int, nargs="+", default=[2])
     ap.add_argument("--formulations", nargs="+",
                     default=["merged", "merged_boomeramg", "master_slave", "two_pass", "quasi_symmetric",
-                             "quasi_symmetric+small", "quasi_symmetric+soft", "quasi_symmetric+small+soft"])
+                             "quasi_symmetric+fresh", "quasi_symmetric+small", "quasi_symmetric+soft",
+                             "quasi_symmetric+small+soft"])
     add_docs_args(ap, "Contact: two cubes between rigid dies")
     args = ap.parse_args()
     rows, loads = [], [load()]
@@ -107,7 +110,9 @@ def main():
                    "the same 1 x 1 x 2 stack meshed as one conforming body with about the same number of dofs "
                    "(its default CG + GAMG), `merged_boomeramg` = the same with `-qsc_pc_type hypre` (CG + "
                    "BoomerAMG with the defaults the contact band's multigrid uses), `+small` = the pair with small sliding "
-                   "(searched once, in the undeformed configuration), `+soft` = with `solver.contact_multigrid_alpha "
+                   "(searched once, in the undeformed configuration), `+fresh` = with `reuse_tolerance = 0` (finite "
+                   "sliding that takes every search's rows; the others keep the first search's rows when the second "
+                   "finds them unchanged within the default 1e-3), `+soft` = with `solver.contact_multigrid_alpha "
                    "= 1` (BoomerAMG set up on the interface at alpha 1, the Krylov method and the band's solve on "
                    "alpha 1e4). "
                    "Seconds, max over ranks; total = the sum of the phases (exclusive: search and rows are not counted "

@@ -30,11 +30,11 @@ def test_unchanged_active_set_keeps_the_jacobian(tmp_path):
     (one assembly per increment) and still give the direct solver's answer. Each increment starts from the
     previous state (the extrapolating predictor would make the second increment's first step exact)."""
     run, summary = run_scene(scene_without_petsc(tmp_path), tmp_path / "iterative",
-                             SMALL + ['solver.predictor="previous"'])
+                             SMALL + ['solver.predictor="previous"', "contact.0.reuse_tolerance=0"])
     solves = _solves(summary)
     assert all(s["snes_iterations"] == 2 and s["jacobian_assemblies"] == 1 for s in solves)
     u = run.u.getArray().copy()
-    direct, _ = run_scene(CONFIGS / "two_cubes_dies.toml", tmp_path / "direct", SMALL)
+    direct, _ = run_scene(CONFIGS / "two_cubes_dies.toml", tmp_path / "direct", SMALL + ["contact.0.reuse_tolerance=0"])
     ref = direct.u.getArray()
     assert np.abs(u - ref).max() <= 1e-8 * np.abs(ref).max()
 
@@ -53,14 +53,15 @@ def test_search_with_the_same_coupling_keeps_jacobian_and_band(tmp_path, monkeyp
         seen.append((self.J.handle, pc.handle, pc.getType(), [t.node_local for t in terms]))
 
     monkeypatch.setattr(System, "set_terms", spy)
-    run, summary = run_scene(scene_without_petsc(tmp_path), tmp_path / "iterative", SMALL)
+    run, summary = run_scene(scene_without_petsc(tmp_path), tmp_path / "iterative",
+                             SMALL + ["contact.0.reuse_tolerance=0"])
     assert summary["status"] == "ok" and len(seen) == 2
     (j1, pc1, kind, local), (j2, pc2, _, _) = seen
     assert kind == "composite" and (j1, pc1) == (j2, pc2)
     assert local == [False, True, True]                 # contact[0], die[0], die[1]
     assert run.system.band_parts.keep                   # the second increment kept the first one's setup
     u = run.u.getArray().copy()
-    direct, _ = run_scene(CONFIGS / "two_cubes_dies.toml", tmp_path / "direct", SMALL)
+    direct, _ = run_scene(CONFIGS / "two_cubes_dies.toml", tmp_path / "direct", SMALL + ["contact.0.reuse_tolerance=0"])
     ref = direct.u.getArray()
     assert np.abs(u - ref).max() <= 1e-8 * np.abs(ref).max()
 

@@ -1,5 +1,6 @@
 """Small sliding (contact[i].sliding = "small"): a pair searched once, in the undeformed configuration, whose
-rows the whole run keeps; against the default finite sliding (a new search at every load step). Two cubes
+rows the whole run keeps; against the default finite sliding (a new search at every load step, whose rows
+replace the last ones unless they are the same within reuse_tolerance). Two cubes
 between sticking dies, serial; the iterative defaults where iterations are counted, else MUMPS (the scene's
 table)."""
 
@@ -43,7 +44,7 @@ def test_small_sliding_searches_once_and_gives_the_flat_contact_answer(tmp_path,
     scene = scene_without_petsc(tmp_path)
     base = SMALL + [f"contact.0.formulation={formulation}"]
     calls = _count_searches(monkeypatch)
-    finite_run, finite = run_scene(scene, tmp_path / "finite", base)
+    finite_run, finite = run_scene(scene, tmp_path / "finite", base + ["contact.0.reuse_tolerance=0"])
     assert len(calls) == 3 * passes
     calls.clear()
     small_run, small = run_scene(scene, tmp_path / "small", base + ['contact.0.sliding="small"'])
@@ -124,3 +125,60 @@ def test_slip_is_measured_and_small_sliding_out_of_range_is_named(tmp_path):
     pair = next(iter(flat["steps"][-1]["contact"].values()))
     assert max(pair["max_slip_slave"], pair["max_slip_master"]) < 0.01 * pair["h_eff"]
     assert not [line for line in flat_log if "warning" in line]
+
+
+def test_finite_sliding_keeps_the_rows_of_a_search_that_found_nothing_slid(tmp_path):
+    """Finite sliding with reuse_tolerance (default 1e-3): on the flat two-cube interface each new search's
+    rows are the last ones with gaps within 1e-4 - 2e-4 of the largest penetration of theirs (the second-order
+    change of a 1 % compression, growing with the distance from the kept search), so the run keeps the first search's rows, says so in the step line and the summary,
+    and gives the answer of a new term per search up to that change; reuse_tolerance = 0 takes every search's
+    rows, as before."""
+    fresh, fresh_log = _run_logged(tmp_path / "fresh", SMALL + ["contact.0.reuse_tolerance=0"])
+    reuse, reuse_log = _run_logged(tmp_path / "reuse", SMALL)
+    pairs = [[next(iter(s["contact"].values())) for s in r["steps"]] for r in (fresh, reuse)]
+    assert [(p["rows_kept"], p["gap_change"], p["rows_searched_for"]) for p in pairs[0]] == [
+        (False, None, pytest.approx(t)) for t in (1 / 3, 2 / 3, 1.0)]
+    assert [(p["rows_kept"], p["rows_searched_for"]) for p in pairs[1]] == [
+        (False, pytest.approx(1 / 3)), (True, pytest.approx(1 / 3)), (True, pytest.approx(1 / 3))]
+    changes = [p["gap_change"] for p in pairs[1][1:]]
+    assert all(0 < c <= 1e-3 for c in changes) and changes[0] < changes[1]   # the kept rows drift, slowly
+    kept_lines = [line for line in reuse_log if "kept the last search's rows: contact[0]" in line]
+    assert [line.split(":")[0] for line in kept_lines] == ["step 2/3", "step 3/3"]
+    assert not [line for line in fresh_log if "kept" in line]
+    for a, b in zip(*pairs):
+        assert b["total_normal_force"] == pytest.approx(a["total_normal_force"], rel=1e-7)
+        assert b["active_rows"] == a["active_rows"]
+        assert b["max_penetration_slave"] == pytest.approx(a["max_penetration_slave"], rel=1e-2)
+    u = [r["steps"][-1]["max_abs_displacement"] for r in (fresh, reuse)]
+    assert u[1] == pytest.approx(u[0], rel=1e-6)
+
+
+def test_finite_sliding_searches_anew_where_the_contact_slid(tmp_path):
+    """The upper cube slid sideways (0.075 m = 0.3 h_eff per step): every new search's gaps differ from the
+    last rows' by about the penetration itself or more, or the rows differ (the overhang), so each increment
+    takes the new rows whatever the tolerance and the answer is that of reuse_tolerance = 0, bit for bit."""
+    slide = SMALL[:2] + ["load.steps=4", "die.1.motion=[0.3,0,-0.02]"]
+    fresh, _ = _run_logged(tmp_path / "fresh", slide + ["contact.0.reuse_tolerance=0"])
+    reuse, log = _run_logged(tmp_path / "reuse", slide + ["contact.0.reuse_tolerance=0.1"])
+    pairs = [[next(iter(s["contact"].values())) for s in r["steps"]] for r in (fresh, reuse)]
+    assert not any(p["rows_kept"] for p in pairs[1])
+    assert all(p["gap_change"] is None or p["gap_change"] > 0.1 for p in pairs[1][1:])
+    assert [p["rows_searched_for"] for p in pairs[1]] == pytest.approx([0.25, 0.5, 0.75, 1.0])
+    assert not [line for line in log if "kept" in line]
+    for a, b in zip(*pairs):
+        assert (b["total_normal_force"], b["max_penetration_slave"]) == (a["total_normal_force"],
+                                                                          a["max_penetration_slave"])
+
+
+def test_kept_rows_let_a_later_increment_start_on_the_answer(tmp_path):
+    """Iterative defaults: an increment on kept rows starts from the linear extrapolation of the last two
+    states, exact for those rows while the active set holds, so it needs one Newton step and a Krylov
+    iteration or two; new rows (reuse_tolerance = 0) need more. A negative tolerance names the key."""
+    scene = scene_without_petsc(tmp_path)
+    _, fresh = run_scene(scene, tmp_path / "fresh", SMALL + ["contact.0.reuse_tolerance=0"])
+    _, reuse = run_scene(scene, tmp_path / "reuse", SMALL)
+    later = [[s["ksp_iterations"] for s in r["steps"][1:]] for r in (fresh, reuse)]
+    assert max(later[1]) <= 2 < min(later[0])
+    assert [s["snes_iterations"] for s in reuse["steps"][1:]] == [1, 1]
+    with pytest.raises(SceneError, match=r"contact\[0\]\.reuse_tolerance"):
+        load_scene(CONFIGS / "two_cubes_dies.toml", ["contact.0.reuse_tolerance=-1"])

@@ -214,6 +214,8 @@ class ContactModel:
         self.current = []
         self.faced_at_start = {}   # (pair, side): the opposite material point each node faced at u = 0 (report)
         self.slip_warned = set()
+        # per pair: the load factor of the increment whose search made its rows (at its start), and the last search's gap_change (report)
+        self.searches = {f"contact[{pd['index']}]": {"load_factor": 0.0, "gap_change": None, "kept": False} for pd in self.pairs}
         self.t = 0.0
 
     def _phase(self, name):
@@ -235,13 +237,17 @@ class ContactModel:
         return ConstraintTerm(name, G, g, W, rows.phi, eps_n, closed, gate, augmented, node_local, alpha)
 
     def terms(self, u, t):
-        """New search at the current displacement u, load factor t: one ConstraintTerm per pair and die; a pair
+        """New search at the current displacement u, load factor t: one ConstraintTerm per pair and die. A pair
         with small sliding keeps the term of its first search (its rows and, with the augmented Lagrangian,
-        its multipliers)."""
+        its multipliers); one with finite sliding keeps its last term when the new search's rows are those rows
+        with gaps within reuse_tolerance of them (_gap_change)."""
         small = {f"contact[{pd['index']}]" for pd in self.pairs if pd["spec"].sliding == "small"}
+        reusable = {f"contact[{pd['index']}]" for pd in self.pairs
+                    if pd["spec"].sliding == "finite" and pd["spec"].reuse_tolerance > 0}
         kept = {term.name: term for term in self.current if term.name in small}
+        last = {term.name: term for term in self.current if term.name in reusable}
         for term in self.current:
-            if term.name not in kept:
+            if term.name not in kept and term.name not in last:
                 term.destroy()
         mesh = self.mesh
         U = self.mesh.local_vectors(u)
@@ -253,6 +259,7 @@ class ContactModel:
             name = f"contact[{pd['index']}]"
             if name in kept:
                 out.append(kept[name])
+                self.searches[name] = dict(self.searches[name], gap_change=None, kept=True)
                 continue
             with self._phase("search"):
                 sp = integration_pass(mesh, spec, pd["slave"], pd["master"], X, U, pd["radius"])
@@ -277,6 +284,17 @@ class ContactModel:
                 term = self._term(name, rows, pd["eps_n"], pd["h_eff"], spec.enforcement == "augmented_lagrangian",
                                   alpha=spec.penalty)
                 term.points = points
+                change = None
+                if name in last:
+                    change = _gap_change(last[name], term, u)
+                    if change <= spec.reuse_tolerance:
+                        term.destroy()
+                        term = last[name]
+                    else:
+                        last[name].destroy()
+                if term is not last.get(name):
+                    self.searches[name] = {"load_factor": t}
+                self.searches[name] = dict(self.searches[name], gap_change=change, kept=term is last.get(name))
                 out.append(term)
         for dd in self.dies:
             spec = dd["spec"]
@@ -337,7 +355,10 @@ class ContactModel:
             entry = {"rows": self.comm.allreduce(len(term.rows), op=MPI.SUM),
                      "active_rows": self.comm.allreduce(int(term.active.sum()), op=MPI.SUM),
                      "eps_n": pd["eps_n"], "h_eff": pd["h_eff"], "integration": pd["spec"].integration,
-                     "quadrature_points": term.points, "G_nonzeros": int(term.G.getInfo()["nz_used"])}
+                     "quadrature_points": term.points, "G_nonzeros": int(term.G.getInfo()["nz_used"]),
+                     "rows_searched_for": self.searches[term.name]["load_factor"],
+                     "rows_kept": self.searches[term.name]["kept"],
+                     "gap_change": _finite_or_none(self.searches[term.name]["gap_change"])}
             W = term.W.getArray()[term.rows]
             entry["contact_area"] = self.comm.allreduce(float(term.phi * W[term.active].sum()), op=MPI.SUM)
             mean_pen = {}
@@ -421,6 +442,29 @@ class ContactModel:
         for term in self.current:
             term.destroy()
         self.current = []
+
+
+def _gap_change(last, new, u):
+    """How far the rows of a pair's last term are from a new search's at u (collective): the largest difference
+    of their gaps c / w over the rows, relative to the largest penetration c / w of the new rows; inf when
+    the two searches made different rows, or nothing penetrates and some gap changed."""
+    comm = new.G.getComm().tompi4py()
+    if not comm.allreduce(np.array_equal(last.rows, new.rows), op=MPI.LAND):
+        return np.inf
+    gaps = []
+    for term in (last, new):
+        term.G.mult(u, term.c)
+        term.c.axpy(-1.0, term.g)
+        gaps.append(term.c.getArray()[term.rows] / term.W.getArray()[term.rows])
+    change = comm.allreduce(float(np.abs(gaps[0] - gaps[1]).max(initial=0.0)), op=MPI.MAX)
+    depth = comm.allreduce(float(gaps[1].max(initial=0.0)), op=MPI.MAX)
+    if change == 0.0:
+        return 0.0
+    return change / depth if depth > 0 else np.inf
+
+
+def _finite_or_none(x):
+    return None if x is None or not np.isfinite(x) else float(x)
 
 
 def _term_force(term, u):

@@ -116,6 +116,21 @@ def test_small_sliding_rank_invariance(comm, mpi_tmp):
     assert all(step["snes_iterations"] == 1 for s in summaries for step in s["steps"][1:])
 
 
+def test_kept_rows_rank_invariance(comm, mpi_tmp):
+    """Finite sliding that keeps the rows of a search that found nothing slid (reuse_tolerance, two cubes
+    between dies, 3 load steps, MUMPS): every rank count makes the same choice at each step from the same gap
+    change (all-reduced over the interface split across ranks), and the summary is the serial one to 1e-8."""
+    from qsc_petsc.scene import load_scene
+    scene = load_scene(CONFIGS / "two_cubes_dies.toml", ["bodies.0.mesh.cells=[3,3,3]", "bodies.1.mesh.cells=[4,4,4]",
+                                                          "load.steps=3"])
+    out, summaries = _on_all_and_one_rank(comm, mpi_tmp, scene)
+    assert all_close(comm, np.allclose(out[0], out[1], rtol=1e-8, atol=1e-14))
+    pairs = [[next(iter(st["contact"].values())) for st in s["steps"]] for s in summaries]
+    assert [p["rows_kept"] for p in pairs[0]] == [p["rows_kept"] for p in pairs[1]] == [False, True, True]
+    changes = [[p["gap_change"] for p in run_pairs[1:]] for run_pairs in pairs]
+    assert all_close(comm, np.allclose(changes[0], changes[1], rtol=1e-6))
+
+
 @pytest.mark.parametrize("change, message", [
     ("contact.0.master=lower.top", 'contact[0].master: box body "lower" has no surface "top"'),
     ("contact.0.slave=lower.zmax", "contact[0]"),
