@@ -173,7 +173,8 @@ def test_finite_sliding_searches_anew_where_the_contact_slid(tmp_path):
 def test_kept_rows_let_a_later_increment_start_on_the_answer(tmp_path):
     """Iterative defaults: an increment on kept rows starts from the linear extrapolation of the last two
     states, exact for those rows while the active set holds, so it needs one Newton step and a Krylov
-    iteration or two; new rows (reuse_tolerance = 0) need more. A negative tolerance names the key."""
+    iteration or two; new rows (reuse_tolerance = 0) need more. A negative tolerance names the key; `qsc
+    check` says how the pair is searched."""
     scene = scene_without_petsc(tmp_path)
     _, fresh = run_scene(scene, tmp_path / "fresh", SMALL + ["contact.0.reuse_tolerance=0"])
     _, reuse = run_scene(scene, tmp_path / "reuse", SMALL)
@@ -182,3 +183,8 @@ def test_kept_rows_let_a_later_increment_start_on_the_answer(tmp_path):
     assert [s["snes_iterations"] for s in reuse["steps"][1:]] == [1, 1]
     with pytest.raises(SceneError, match=r"contact\[0\]\.reuse_tolerance"):
         load_scene(CONFIGS / "two_cubes_dies.toml", ["contact.0.reuse_tolerance=-1"])
+    from mpi4py import MPI
+    for sets, says in ((SMALL, "rows kept while a search finds them within 0.001 of the largest penetration"),
+                       (SMALL + ["contact.0.reuse_tolerance=0"], "(searched at every load step);")):
+        scene = load_scene(CONFIGS / "two_cubes_dies.toml", sets)
+        assert says in contact_model.contact_plan(distribute_mesh(scene, MPI.COMM_WORLD), scene)[0]

@@ -214,8 +214,10 @@ class ContactModel:
         self.current = []
         self.faced_at_start = {}   # (pair, side): the opposite material point each node faced at u = 0 (report)
         self.slip_warned = set()
-        # per pair: the load factor of the increment whose search made its rows (at its start), and the last search's gap_change (report)
-        self.searches = {f"contact[{pd['index']}]": {"load_factor": 0.0, "gap_change": None, "kept": False} for pd in self.pairs}
+        # per pair (report): the load factor of the increment whose search made its rows (at that increment's
+        # start), whether they are an earlier search's, and the last search's _gap_change
+        self.searches = {f"contact[{pd['index']}]": {"load_factor": 0.0, "gap_change": None, "kept": False}
+                         for pd in self.pairs}
         self.t = 0.0
 
     def _phase(self, name):
@@ -284,17 +286,14 @@ class ContactModel:
                 term = self._term(name, rows, pd["eps_n"], pd["h_eff"], spec.enforcement == "augmented_lagrangian",
                                   alpha=spec.penalty)
                 term.points = points
-                change = None
+                change, reused = None, False
                 if name in last:
                     change = _gap_change(last[name], term, u)
-                    if change <= spec.reuse_tolerance:
-                        term.destroy()
-                        term = last[name]
-                    else:
-                        last[name].destroy()
-                if term is not last.get(name):
-                    self.searches[name] = {"load_factor": t}
-                self.searches[name] = dict(self.searches[name], gap_change=change, kept=term is last.get(name))
+                    reused = change <= spec.reuse_tolerance
+                    (term if reused else last[name]).destroy()
+                    term = last[name] if reused else term
+                searched_for = self.searches[name]["load_factor"] if reused else t
+                self.searches[name] = {"load_factor": searched_for, "gap_change": change, "kept": reused}
                 out.append(term)
         for dd in self.dies:
             spec = dd["spec"]
@@ -463,6 +462,16 @@ def _gap_change(last, new, u):
     return change / depth if depth > 0 else np.inf
 
 
+def _searched(spec):
+    """How a pair is searched, for `qsc check`."""
+    if spec.sliding == "small":
+        return "searched once"
+    if spec.reuse_tolerance > 0:
+        return (f"searched at every load step; rows kept while a search finds them within {spec.reuse_tolerance:g} "
+                f"of the largest penetration")
+    return "searched at every load step"
+
+
 def _finite_or_none(x):
     return None if x is None or not np.isfinite(x) else float(x)
 
@@ -492,9 +501,8 @@ def contact_plan(mesh, scene):
         rows = mesh.comm.allreduce(len(term.rows), op=MPI.SUM)
         lines.append(f"contact[{pd['index']}]: {spec.slave} (slave) / {spec.master} (master), {spec.formulation}, "
                      f"{spec.enforcement}; h_eff {pd['h_eff']:.4g} m, eps_n {pd['eps_n']:.4g} Pa/m, "
-                     f"search radius {pd['radius']:.4g} m, {spec.sliding} sliding (searched "
-                     f"{'once' if spec.sliding == 'small' else 'at every load step'}); {rows} candidate rows at "
-                     f"the start")
+                     f"search radius {pd['radius']:.4g} m, {spec.sliding} sliding ({_searched(spec)}); {rows} "
+                     f"candidate rows at the start")
     for dd, term in zip(model.dies, terms[len(model.pairs):]):
         spec = dd["spec"]
         rows = mesh.comm.allreduce(len(term.rows), op=MPI.SUM)
