@@ -478,7 +478,8 @@ CONTACT = Table({
                       "whose active set holds starts on its answer (the extrapolating predictor); only points "
                       "within search_distance at the start can ever touch.", default="finite"),
     "reuse_tolerance": Float("Finite sliding: a new search whose rows are the last term's rows, with gaps at the "
-                             "increment's start within this fraction of the pair's largest penetration of theirs, "
+                             "increment's start within this fraction of the pair's largest penetration (with the "
+                             "augmented Lagrangian: its largest pressure / eps_n) of theirs, "
                              "keeps the last term (its rows linearised about the search they come from, as small "
                              "sliding does), so that an increment over which nothing slid starts on the last "
                              "answer's linear extrapolation; 0: every search makes new rows.", ge=0, default=1e-3),

@@ -445,8 +445,11 @@ class ContactModel:
 
 def _gap_change(last, new, u):
     """How far the rows of a pair's last term are from a new search's at u (collective): the largest difference
-    of their gaps c / w over the rows, relative to the largest penetration c / w of the new rows; inf when
-    the two searches made different rows, or nothing penetrates and some gap changed."""
+    of their gaps c / w over the rows, relative to the largest penetration of the new rows, a / eps_n with the
+    row pressure a = lmbda + eps_n c / w of penalty.row_response (the augmented Lagrangian's multipliers
+    lmbda, the last term's, count: its pressure is carried at a near-zero gap); inf when the two searches made
+    different rows, or nothing presses and some gap changed. eps_n x this is the pressure error that keeping
+    the last rows makes at u, relative to the largest contact pressure."""
     comm = new.G.getComm().tompi4py()
     if not comm.allreduce(np.array_equal(last.rows, new.rows), op=MPI.LAND):
         return np.inf
@@ -456,7 +459,8 @@ def _gap_change(last, new, u):
         term.c.axpy(-1.0, term.g)
         gaps.append(term.c.getArray()[term.rows] / term.W.getArray()[term.rows])
     change = comm.allreduce(float(np.abs(gaps[0] - gaps[1]).max(initial=0.0)), op=MPI.MAX)
-    depth = comm.allreduce(float(gaps[1].max(initial=0.0)), op=MPI.MAX)
+    held = gaps[1] + (last.lmbda / new.eps_n if last.lmbda is not None else 0.0)
+    depth = comm.allreduce(float(held.max(initial=0.0)), op=MPI.MAX)
     if change == 0.0:
         return 0.0
     return change / depth if depth > 0 else np.inf
