@@ -51,6 +51,15 @@ def cell_materials(mesh, scene):
     return lame[mesh.cell_body, 0], lame[mesh.cell_body, 1]
 
 
+def plain_rows(A):
+    """Let A multiply with AIJ's plain row kernel instead of the i-node one (rows of identical pattern
+    taken together), unless -mat_no_inode 0 says otherwise: on the 985k-dof box at 2 ranks, three runs
+    each, MatMult took 5.5-6.0 s against 6.6-6.7 s and KSPSolve 6.0-6.5 s against 7.1-7.2 s (433
+    products; docs/performance.md). PETSc reads the flag when it multiplies, so it also holds for a
+    matrix already assembled; a matrix PETSc makes anew (MatAXPY with a new pattern) needs it again."""
+    A.setOption(PETSc.Mat.Option.USE_INODES, not PETSc.Options().getBool("mat_no_inode", True))
+
+
 BATCH = 1 << 19           # candidates (element blocks) summed per batch: ~40 MB of temporaries
 
 
@@ -110,6 +119,7 @@ def stiffness_matrix(mesh, lmbda, mu):
     A = PETSc.Mat().createAIJWithArrays(size, csr, comm=comm)
     A.setBlockSizes(3, 3)          # createAIJWithArrays ignores bsize; GAMG aggregates by it
     A.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, True)
+    plain_rows(A)
     return A
 
 
@@ -164,6 +174,7 @@ def lattice_stiffness_matrix(mesh, lattices):
     A = PETSc.Mat().createAIJWithArrays(size, csr, comm=comm)
     A.setBlockSizes(3, 3)
     A.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, True)
+    plain_rows(A)
     return A
 
 

@@ -14,7 +14,7 @@ import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from . import options, preconditioner
+from . import assembly, options, preconditioner
 from .contact.penalty import multipliers_update, row_response
 from .errors import ConvergenceError, SceneError, petsc_detail
 
@@ -278,6 +278,7 @@ class System:
                 pattern.zeroEntries()
                 J.axpy(1.0, pattern, PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
                 pattern.destroy()
+                assembly.plain_rows(J)         # the new pattern's matrix is PETSc's, with its defaults
             J.setNearNullSpace(self.K.getNearNullSpace())
             if self.J is not self.K:
                 self.J.destroy()
