@@ -448,6 +448,13 @@ def test_module_prints_schema_markdown():
     assert out == schema_markdown()
 
 
+def test_docs_scene_reference_is_the_schema():
+    """docs/scene_reference.md is what `python -m qsc_petsc.scene` prints: a key added to the schema without
+    regenerating it (contact[].reuse_tolerance once was) fails here."""
+    assert (ROOT / "docs" / "scene_reference.md").read_text() == schema_markdown(), \
+        "regenerate it: .venv/bin/python -m qsc_petsc.scene > docs/scene_reference.md"
+
+
 def test_weight_power_table_round_trips():
     """A {power = p} weight shall parse from --set, survive the resolved TOML, and reach the row builder as a dict."""
     scene = parse(two_cubes(), ["contact.0.weight={power=3}", "contact.0.integration=gauss",
