@@ -450,8 +450,11 @@ def test_module_prints_schema_markdown():
 
 def test_docs_scene_reference_is_the_schema():
     """docs/scene_reference.md is what `python -m qsc_petsc.scene` prints: a key added to the schema without
-    regenerating it (contact[].reuse_tolerance once was) fails here."""
-    assert (ROOT / "docs" / "scene_reference.md").read_text() == schema_markdown(), \
+    regenerating it (contact[].reuse_tolerance once was) fails here. The container image holds no docs/."""
+    reference = ROOT / "docs" / "scene_reference.md"
+    if not (ROOT / "docs").is_dir():
+        pytest.skip("no docs/ folder here (the container image copies code, configs and tests only)")
+    assert reference.read_text() == schema_markdown(), \
         "regenerate it: .venv/bin/python -m qsc_petsc.scene > docs/scene_reference.md"
 
 
