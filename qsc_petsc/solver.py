@@ -88,11 +88,15 @@ class ConstraintTerm:
         self.start = None
         self.held_closed = None
 
-    def evaluate(self, u):
-        """Row values, multipliers and active set at u (collective)."""
+    def row_values(self, u):
+        """c = G u - g at u, kept in self.c; returns its existing rows (collective)."""
         self.G.mult(u, self.c)
         self.c.axpy(-1.0, self.g)
-        c = self.c.getArray()[self.rows]
+        return self.c.getArray()[self.rows]
+
+    def evaluate(self, u):
+        """Row values, multipliers and active set at u (collective)."""
+        c = self.row_values(u)
         tol = self.closed_tol
         if self.start == START_REACH:
             tol = np.full(len(c), np.inf)

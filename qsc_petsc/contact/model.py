@@ -453,11 +453,7 @@ def _gap_change(last, new, u):
     comm = new.G.getComm().tompi4py()
     if not comm.allreduce(np.array_equal(last.rows, new.rows), op=MPI.LAND):
         return np.inf
-    gaps = []
-    for term in (last, new):
-        term.G.mult(u, term.c)
-        term.c.axpy(-1.0, term.g)
-        gaps.append(term.c.getArray()[term.rows] / term.W.getArray()[term.rows])
+    gaps = [term.row_values(u) / term.W.getArray()[term.rows] for term in (last, new)]
     change = comm.allreduce(float(np.abs(gaps[0] - gaps[1]).max(initial=0.0)), op=MPI.MAX)
     held = gaps[1] + (last.lmbda / new.eps_n if last.lmbda is not None else 0.0)
     depth = comm.allreduce(float(held.max(initial=0.0)), op=MPI.MAX)
