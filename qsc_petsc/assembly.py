@@ -60,6 +60,16 @@ def plain_rows(A):
     A.setOption(PETSc.Mat.Option.USE_INODES, not PETSc.Options().getBool("mat_no_inode", True))
 
 
+def _stiffness_operator(size, csr, comm):
+    """K from its CSR arrays (split diagonal / off-diagonal parts on several ranks), as both assemblies hand it
+    over: block size 3, no new nonzeros, the plain row kernel."""
+    A = PETSc.Mat().createAIJWithArrays(size, csr, comm=comm)
+    A.setBlockSizes(3, 3)          # createAIJWithArrays ignores bsize; GAMG aggregates by it
+    A.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, True)
+    plain_rows(A)
+    return A
+
+
 BATCH = 1 << 19           # candidates (element blocks) summed per batch: ~40 MB of temporaries
 
 
@@ -116,11 +126,7 @@ def stiffness_matrix(mesh, lmbda, mu):
     else:
         oi = sparsity.point_rowptr(rowptr_o, np.diff(pattern.rowptr) - n_diag).astype(PETSc.IntType)
         csr = ((di, cols[:n_d], vals[:n_d]), (oi, cols[n_d:], vals[n_d:]))
-    A = PETSc.Mat().createAIJWithArrays(size, csr, comm=comm)
-    A.setBlockSizes(3, 3)          # createAIJWithArrays ignores bsize; GAMG aggregates by it
-    A.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, True)
-    plain_rows(A)
-    return A
+    return _stiffness_operator(size, csr, comm)
 
 
 def lattice_stiffness_matrix(mesh, lattices):
@@ -171,11 +177,7 @@ def lattice_stiffness_matrix(mesh, lattices):
         oi = sparsity.point_rowptr(rowptr_o, n_off).astype(PETSc.IntType)
         csr = (csr, (oi, col0[off], blocks[off]))
     size = ((3 * n, 3 * mesh.n_vertices), (3 * n, 3 * mesh.n_vertices))
-    A = PETSc.Mat().createAIJWithArrays(size, csr, comm=comm)
-    A.setBlockSizes(3, 3)
-    A.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, True)
-    plain_rows(A)
-    return A
+    return _stiffness_operator(size, csr, comm)
 
 
 def _box_rows(mesh, lattices):
