@@ -14,7 +14,7 @@ per Newton step with BoomerAMG and 54-79 with GAMG (docs/performance.md).
 GMRES takes the multiplicative composite, one V-cycle per iteration; CG needs the symmetric one, two.
 BoomerAMG's settings (HMIS coarsening, ext+i interpolation, at most 4 weights per row, strength
 threshold 0.5, one level of aggressive coarsening: the usual 3-D elasticity choices; one forward
-l1-Gauss-Seidel sweep down and one backward sweep up) are defaults that any `-qsc_pc_hypre_*` option overrides. The multigrid reads the system's own
+l1-Gauss-Seidel sweep down and one backward sweep up, in the rows' order) are defaults that any `-qsc_pc_hypre_*` option overrides. The multigrid reads the system's own
 options (`-qsc_pc_*`); the band is one submatrix across all ranks, factored once per new Jacobian
 (`-qsc_band_*`: default preonly + Cholesky with MUMPS). Both parts are Python contexts in a PETSc composite
 sharing a Parts flag, so that System can keep their setups across a new search that moved only the
@@ -40,11 +40,14 @@ AMG_TYPES = ("hypre", "gamg")        # the band's partner: the first is the defa
 # symmetric hybrid Gauss-Seidel sweeps; the l1 form converges where penalty rows couple across ranks, where
 # hybrid Gauss-Seidel (Jacobi between ranks) need not (plain CG + BoomerAMG stopped with an indefinite
 # preconditioner on 3 ranks, patch test). Two cubes, 212k dofs: 22.7 s against 27.4 s (docs/performance.md).
+# The sweeps take the rows in their order (no_CF), not hypre's C-points-then-F-points: the same Krylov counts
+# (+-1, Hertz +2 %) at 10-14 % less time per V-cycle (docs/performance.md, session 14).
 HYPRE_DEFAULTS = {"pc_hypre_boomeramg_coarsen_type": "HMIS", "pc_hypre_boomeramg_interp_type": "ext+i",
                   "pc_hypre_boomeramg_P_max": "4", "pc_hypre_boomeramg_strong_threshold": "0.5",
                   "pc_hypre_boomeramg_agg_nl": "1",
                   "pc_hypre_boomeramg_relax_type_down": "l1-Gauss-Seidel",
-                  "pc_hypre_boomeramg_relax_type_up": "backward-l1-Gauss-Seidel"}
+                  "pc_hypre_boomeramg_relax_type_up": "backward-l1-Gauss-Seidel",
+                  "pc_hypre_boomeramg_no_CF": "true"}
 GMRES_RESTART = 100        # above the iteration counts measured (docs/performance.md): no restarts
 COARSE_CUTOFF = 1e-12      # eigenvalues of Z^T J Z below this fraction of its largest: directions dropped
 RUN_GAP = 4096             # the slip correction's dense slices bridge gaps of up to this many dofs
