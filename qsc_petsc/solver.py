@@ -254,22 +254,24 @@ class System:
         to K); any other search builds J anew. The contact band's preconditioner objects stay when J's
         pattern and the band do (_keep_or_rebuild_pc may then keep its setup too)."""
         self.terms = terms
+        self.prev_active = None
+        rows = [_rows_digest(term) for term in terms]
+        if terms and self.J is not self.K and self.comm.allreduce(rows == self.rows_signature, op=MPI.LAND):
+            # every row as the last search's (a die with nothing else, a pair's kept term): J = K + sum G^T
+            # diag(d) G as it is, with the stiffnesses it holds, and the band and the preconditioner objects it
+            # had; an unchanged active set keeps them all untouched (the terms make their products when asked)
+            self.pc_candidate = False
+            return
         # G^T G of every term (the terms keep the product for their Jacobians): the Jacobian's contact stencil,
         # and the contact pairs' band for the preconditioner
         stencils = [term.jacobian(np.ones_like(term.d)) for term in terms]
         # a die's rows act on one node each: its stencil is inside K's pattern already
         coupling = [GtG for term, GtG in zip(terms, stencils) if not term.node_local]
         signature = [_pattern_digest(GtG) for GtG in coupling]
-        rows = [_rows_digest(term) for term in terms]
         kept = bool(terms) and self.J is not self.K and self.comm.allreduce(signature == self.stencil_signature,
                                                                              op=MPI.LAND)
-        same_rows = kept and self.comm.allreduce(rows == self.rows_signature, op=MPI.LAND)
         if not terms:
             self.J = self.K
-        elif same_rows:
-            # every row as the last search's (a die with nothing else): J = K + sum G^T diag(d) G as it is, with
-            # the stiffnesses it holds; an unchanged active set keeps it and its preconditioner untouched
-            pass
         elif kept:
             # the new rows couple the same dofs as the last search's (a flat contact): J keeps its pattern
             self._reset_to_stiffness(self.J)
@@ -289,15 +291,14 @@ class System:
             self.J = J
         self.stencil_signature, self.rows_signature = signature, rows
         self.snes.setJacobian(self._jacobian, self.J, self.J)
-        if not same_rows:
-            self.jacobian_d = [np.zeros_like(term.d) for term in terms]
+        self.jacobian_d = [np.zeros_like(term.d) for term in terms]
         # the stencils that couple nodes are the contact pairs' (dies are node-local): the band follows them
         if preconditioner.wants_band(self.contact_pc, bool(coupling)):
-            band = preconditioner.band_dofs(self.K, coupling, self.band_layers)
             # J's pattern and the band of the last search keep its preconditioner objects: the next setup is
-            # numeric only (the band's symbolic factorization and the composite's construction are not redone)
-            same = kept and self.band is not None and self.comm.allreduce(np.array_equal(band, self.band),
-                                                                           op=MPI.LAND)
+            # numeric only (the band's symbolic factorization and the composite's construction are not redone).
+            # The band is a function of the stencils' pattern, so a kept pattern keeps it
+            same = kept and self.band is not None
+            band = self.band if same else preconditioner.band_dofs(self.K, coupling, self.band_layers)
             if not same:
                 self.band_dofs, self.band_parts = preconditioner.install_band_pc(
                     self.snes.getKSP(), band, self.comm, self.slip_modes,
@@ -305,9 +306,8 @@ class System:
                 self.band, self.pc_rows = band, None
             # the first Jacobian may keep the preconditioner as it is (_keep_or_rebuild_pc) if the rows barely moved
             pairs = [term for term in terms if not term.node_local]
-            self.pc_candidate = same and not same_rows and self._stencils_close(pairs, coupling)
+            self.pc_candidate = same and self._stencils_close(pairs, coupling)
             self.search_stencils = [GtG.copy() for GtG in coupling]
-        self.prev_active = None
 
     def _residual(self, snes, u, f):
         self.K.mult(u, f)
