@@ -66,6 +66,34 @@ def test_search_with_the_same_coupling_keeps_jacobian_and_band(tmp_path, monkeyp
     assert np.abs(u - ref).max() <= 1e-8 * np.abs(ref).max()
 
 
+@pytest.mark.parametrize("reuse", ["0", "1e-3"])
+def test_a_kept_search_does_not_redo_the_band(tmp_path, monkeypatch, reuse):
+    """The band follows the contact stencil's pattern: a later search with the same pattern (new rows,
+    reuse_tolerance = 0) or the very same term (the default tolerance keeps it) keeps J, the composite and
+    the band without computing the band again, and the kept term's search leaves J's stiffnesses as they
+    were (no Jacobian assembled in that increment)."""
+    from qsc_petsc import preconditioner
+    calls = []
+    original = preconditioner.band_dofs
+    monkeypatch.setattr(preconditioner, "band_dofs", lambda *a, **k: calls.append(1) or original(*a, **k))
+    seen = []
+    set_terms = System.set_terms
+
+    def spy(self, terms):
+        set_terms(self, terms)
+        seen.append((self.J.handle, self.snes.getKSP().getPC().handle, self.band))
+
+    monkeypatch.setattr(System, "set_terms", spy)
+    _, summary = run_scene(scene_without_petsc(tmp_path), tmp_path / "out",
+                           SMALL + [f"contact.0.reuse_tolerance={reuse}", "load.steps=3"])
+    assert summary["status"] == "ok" and len(seen) == 3 and len(calls) == 1
+    assert len({(j, pc) for j, pc, _ in seen}) == 1 and all(band is seen[0][2] for _, _, band in seen)
+    kept = [next(iter(step["contact"].values()))["rows_kept"] for step in summary["steps"]]
+    assert kept == ([False] * 3 if reuse == "0" else [False, True, True])
+    if reuse != "0":
+        assert [s["jacobian_assemblies"] for s in _solves(summary)][1:] == [0, 0]
+
+
 def test_search_with_the_same_rows_keeps_the_jacobian_as_it_is(tmp_path):
     """A block between two dies: every search finds the same die rows, so J keeps its stiffnesses and, the
     active set unchanged, no increment after the first assembles a Jacobian or rebuilds its preconditioner;
