@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from qsc_petsc import elasticity as el
+from qsc_petsc import fem
 from qsc_petsc.errors import MeshError
 
 E, NU = 210e9, 0.3                     # Pa, -
@@ -85,6 +86,21 @@ def test_stiffness_symmetric_with_rigid_body_kernel(cell_type):
     # exactly six zero eigenvalues per cell
     ev = np.linalg.eigvalsh(K) / scale
     assert ((np.abs(ev) < 1e-10).sum(axis=1) == 6).all()
+
+
+@pytest.mark.parametrize("cell_type", ["hex", "tet"])
+def test_cell_stress_is_d_b_u_at_the_centroid(cell_type):
+    """cell_stress (from the displacement gradient) shall equal D B u at the reference centroid for any nodal
+    displacements and per-cell Lame parameters, in one chunk or several."""
+    xe = distorted_cells(cell_type, 7, seed=8)
+    rng = np.random.default_rng(9)
+    ue = rng.standard_normal((7, 3 * xe.shape[1]))
+    lmbda, mu = LMBDA * rng.uniform(0.5, 2.0, 7), MU * rng.uniform(0.5, 2.0, 7)
+    B, _ = el.strain_displacement(cell_type, xe, fem.CENTROID[cell_type])
+    expected = (el.elasticity_matrix(lmbda, mu) @ (B[:, 0] @ ue[..., None]))[..., 0]
+    for chunk in (16384, 3):
+        got = el.cell_stress(cell_type, xe, ue, lmbda, mu, chunk=chunk)
+        assert np.abs(got - expected).max() <= 1e-12 * np.abs(expected).max()
 
 
 @pytest.mark.parametrize("cell_type", ["hex", "tet"])
