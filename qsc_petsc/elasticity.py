@@ -166,8 +166,9 @@ def strain_energy(cell_type, xe, ue, lmbda, mu):
 def cell_stress(cell_type, xe, ue, lmbda, mu, chunk=16384):
     """Cauchy stress (m, 6), Voigt order, at each cell's reference centroid.
 
-    Cells go through in chunks: B alone is 1.2 kB per hex, so a million-dof box would otherwise
-    hold ~0.2 GB of temporaries per rank at output time."""
+    Computed from the displacement gradient H = G^T u_e (G the shape-function gradients there), not from the
+    strain-displacement matrix B (6 x 3n per cell), which took 18x as long for 100k distorted hexes (0.86 s
+    against 0.05 s, docs/performance.md, session 14). Cells go through in chunks to bound the temporaries."""
     xe, ue = np.asarray(xe, float), np.asarray(ue, float)
     m, n = xe.shape[:2]
     lmbda, mu = (np.broadcast_to(np.asarray(p, float), (m,)) for p in (lmbda, mu))
@@ -175,8 +176,7 @@ def cell_stress(cell_type, xe, ue, lmbda, mu, chunk=16384):
     for s in range(0, m, chunk):
         c = slice(s, s + chunk)
         G, _ = _gradients(cell_type, xe[c], np.atleast_2d(fem.CENTROID[cell_type]))
-        # the displacement gradient H_kj = d u_j / d x_k, then sigma = lmbda tr(eps) I + 2 mu eps from it
-        # directly (B, 6 x 3n per cell, cost twice the rest here)
+        # H_kj = d u_j / d x_k; sigma = lmbda tr(eps) I + 2 mu eps, Voigt order, shear as mu (H_jk + H_kj)
         H = np.matmul(G[:, 0].transpose(0, 2, 1), ue[c].reshape(-1, n, 3))
         lam_tr = lmbda[c] * (H[:, 0, 0] + H[:, 1, 1] + H[:, 2, 2])
         for i, (j, k) in enumerate([(0, 0), (1, 1), (2, 2), (1, 2), (0, 2), (0, 1)]):

@@ -147,7 +147,7 @@ def _pass_entries(pss):
 
 
 def _grouped_products(a, b, starts, counts):
-    """sum over each group's rows q of a[q] (outer) b[q], for rows sorted by group (group i: counts[i] rows from
+    """The sum over each group's rows q of a[q] (outer) b[q], for rows sorted by group (group i: counts[i] rows from
     starts[i]): one batched product per group size, so no (rows, a, b) temporary (212k dofs, a segment pass
     of 45k points: 5 ms against 30 ms for the outer products summed with reduceat)."""
     out = np.empty((len(starts), a.shape[1], b.shape[1]))
