@@ -2,8 +2,11 @@
 """Benchmark the two-cube scene between rigid dies per formulation, against the same mesh as one conforming body.
 
 Writes the table into docs/performance.md. Usage:
-.venv/bin/python scripts/bench_contact.py [--cells 17 25 39] [--ranks 2]
+.venv/bin/python scripts/bench_contact.py [--cells 17 25 39] [--ranks 2] [--repeat 3]
 (cells = the lower cube's cells per direction; the upper cube has 3/2 as many, non-matching).
+--repeat R runs the whole list of formulations R times in turn and reports each one's median run (by total),
+with the range of its totals: this machine's speed drifts by up to 1.4x over minutes, and runs taken in turn
+see the same drift.
 A formulation "<name>+small" is that formulation with small sliding (contact[0].sliding = "small": searched once),
 "<name>+soft" with solver.contact_multigrid_alpha = 1 (BoomerAMG set up on the interface at alpha 1), "<name>+fresh"
 with contact[0].reuse_tolerance = 0 (finite sliding that takes every search's rows); they combine.
@@ -78,6 +81,7 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--cells", type=int, nargs="+", default=[17, 25, 39])
     ap.add_argument("--ranks", type=int, nargs="+", default=[2])
+    ap.add_argument("--repeat", type=int, default=1, help="runs of each formulation, taken in turn (median kept)")
     ap.add_argument("--formulations", nargs="+",
                     default=["merged", "merged_boomeramg", "master_slave", "two_pass", "quasi_symmetric",
                              "quasi_symmetric+fresh", "quasi_symmetric+small", "quasi_symmetric+soft",
@@ -87,18 +91,23 @@ def main():
     rows, loads = [], [load()]
     for n in args.cells:
         for r in args.ranks:
-            base = {}
+            base, samples = {}, {f: [] for f in args.formulations}
+            for _ in range(args.repeat):
+                for f in args.formulations:
+                    extra = MERGED_BOOMERAMG if f == "merged_boomeramg" else []
+                    s, _ = run(scene(n, f), r, args.petsc.split() + extra)
+                    samples[f].append((sum(s["time"].values()), s))
             for f in args.formulations:
-                extra = MERGED_BOOMERAMG if f == "merged_boomeramg" else []
-                s, _ = run(scene(n, f), r, args.petsc.split() + extra)
+                totals = sorted(total for total, _ in samples[f])
+                total, s = sorted(samples[f], key=lambda x: x[0])[len(totals) // 2]
                 t = s["time"]
-                total = sum(t.values())
                 if f.startswith("merged"):
                     base[f] = total
                 ratios = " | ".join(f"{total / base[b]:.2f}" if b in base else "-"
                                     for b in ("merged", "merged_boomeramg"))
+                shown = f"{total:.2f}" + (f" ({totals[0]:.2f}-{totals[-1]:.2f})" if len(totals) > 1 else "")
                 rows.append(f"| {s['mesh']['dofs']} | {r} | {f} | {t.get('search', 0):.2f} | {t.get('rows', 0):.2f} | "
-                            f"{t['assembly']:.2f} | {t['solve']:.2f} | {total:.2f} | {ratios} | "
+                            f"{t['assembly']:.2f} | {t['solve']:.2f} | {shown} | {ratios} | "
                             f"{sum(x['snes_iterations'] for x in s['steps'])} | "
                             f"{sum(x['ksp_iterations'] for x in s['steps'])} | {s['peak_memory_mib']['total']:.0f} |")
                 print(rows[-1], flush=True)
@@ -115,7 +124,9 @@ def main():
                    "finds them unchanged within the default 1e-3), `+soft` = with `solver.contact_multigrid_alpha "
                    "= 1` (BoomerAMG set up on the interface at alpha 1, the Krylov method and the band's solve on "
                    "alpha 1e4). "
-                   "Seconds, max over ranks; total = the sum of the phases (exclusive: search and rows are not counted "
+                   + (f"Each row the median of {args.repeat} runs taken in turn with the other rows' (by total; "
+                      "its range in brackets), ratios between medians. " if args.repeat > 1 else "")
+                   + "Seconds, max over ranks; total = the sum of the phases (exclusive: search and rows are not counted "
                    "again in solve, as they were in tables before session 4); x merged, x merged_boomeramg = total "
                    "/ that merged run's total; solve includes the residual/Jacobian contact products; memory = peak resident set over "
                    f"all ranks, MiB; {loads[0]} before, {loads[1]} after)")
