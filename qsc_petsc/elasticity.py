@@ -21,6 +21,7 @@ CHUNK = 2048  # cells per vectorised batch: temporaries stay in cache (~10 MB fo
 _VOIGT = np.zeros((6, 3, 3))
 for _i, (_j, _k) in enumerate([(0, 0), (1, 1), (2, 2), (1, 2), (0, 2), (0, 1)]):
     _VOIGT[_i, _j, _k] = _VOIGT[_i, _k, _j] = 1.0
+_VOIGT_OF_GRADIENT = _VOIGT.transpose(0, 2, 1).reshape(6, 9).T     # (9, 6): H.ravel() (H_kj = d u_j / d x_k) -> eps
 
 
 def lame(youngs_modulus, poissons_ratio):
@@ -166,9 +167,9 @@ def strain_energy(cell_type, xe, ue, lmbda, mu):
 def cell_stress(cell_type, xe, ue, lmbda, mu, chunk=16384):
     """Cauchy stress (m, 6), Voigt order, at each cell's reference centroid.
 
-    Computed from the displacement gradient H = G^T u_e (G the shape-function gradients there), not from the
-    strain-displacement matrix B (6 x 3n per cell), which took 18x as long for 100k distorted hexes (0.86 s
-    against 0.05 s, docs/performance.md, session 14). Cells go through in chunks to bound the temporaries."""
+    Computed from the displacement gradient H = G^T u_e (G the shape-function gradients there) and the Voigt
+    table, not from the strain-displacement matrix B (6 x 3n per cell): 100k distorted hexes, both chunked,
+    51-58 ms against 126-139 ms (docs/performance.md, session 14). Chunks bound the temporaries."""
     xe, ue = np.asarray(xe, float), np.asarray(ue, float)
     m, n = xe.shape[:2]
     lmbda, mu = (np.broadcast_to(np.asarray(p, float), (m,)) for p in (lmbda, mu))
@@ -176,11 +177,9 @@ def cell_stress(cell_type, xe, ue, lmbda, mu, chunk=16384):
     for s in range(0, m, chunk):
         c = slice(s, s + chunk)
         G, _ = _gradients(cell_type, xe[c], np.atleast_2d(fem.CENTROID[cell_type]))
-        # H_kj = d u_j / d x_k; sigma = lmbda tr(eps) I + 2 mu eps, Voigt order, shear as mu (H_jk + H_kj)
-        H = np.matmul(G[:, 0].transpose(0, 2, 1), ue[c].reshape(-1, n, 3))
-        lam_tr = lmbda[c] * (H[:, 0, 0] + H[:, 1, 1] + H[:, 2, 2])
-        for i, (j, k) in enumerate([(0, 0), (1, 1), (2, 2), (1, 2), (0, 2), (0, 1)]):
-            out[c, i] = mu[c] * (H[:, j, k] + H[:, k, j]) + (lam_tr if j == k else 0.0)
+        H = np.matmul(G[:, 0].transpose(0, 2, 1), ue[c].reshape(-1, n, 3))      # H_kj = d u_j / d x_k
+        eps = H.reshape(len(H), 9) @ _VOIGT_OF_GRADIENT                           # Voigt strain, as B u gives it
+        out[c] = (elasticity_matrix(lmbda[c], mu[c]) @ eps[..., None])[..., 0]
     return out
 
 

@@ -98,14 +98,14 @@ def main():
                     s, _ = run(scene(n, f), r, args.petsc.split() + extra)
                     samples[f].append((sum(s["time"].values()), s))
             for f in args.formulations:
-                totals = sorted(total for total, _ in samples[f])
-                total, s = sorted(samples[f], key=lambda x: x[0])[len(totals) // 2]
+                ranked = sorted(samples[f], key=lambda sample: sample[0])
+                total, s = ranked[len(ranked) // 2]
                 t = s["time"]
                 if f.startswith("merged"):
                     base[f] = total
                 ratios = " | ".join(f"{total / base[b]:.2f}" if b in base else "-"
                                     for b in ("merged", "merged_boomeramg"))
-                shown = f"{total:.2f}" + (f" ({totals[0]:.2f}-{totals[-1]:.2f})" if len(totals) > 1 else "")
+                shown = f"{total:.2f}" + (f" ({ranked[0][0]:.2f}-{ranked[-1][0]:.2f})" if len(ranked) > 1 else "")
                 rows.append(f"| {s['mesh']['dofs']} | {r} | {f} | {t.get('search', 0):.2f} | {t.get('rows', 0):.2f} | "
                             f"{t['assembly']:.2f} | {t['solve']:.2f} | {shown} | {ratios} | "
                             f"{sum(x['snes_iterations'] for x in s['steps'])} | "
