@@ -16,9 +16,9 @@ BoomerAMG's settings (HMIS coarsening, ext+i interpolation, at most 4 weights pe
 threshold 0.5, one level of aggressive coarsening: the usual 3-D elasticity choices; one forward
 l1-Gauss-Seidel sweep down and one backward sweep up, in the rows' order) are defaults that any `-qsc_pc_hypre_*` option overrides. The multigrid reads the system's own
 options (`-qsc_pc_*`); the band is one submatrix across all ranks, factored once per new Jacobian
-(`-qsc_band_*`: default preonly + Cholesky with MUMPS). Both parts are Python contexts in a PETSc composite
-sharing a Parts flag, so that System can keep their setups across a new search that moved only the
-projections.
+(`-qsc_band_*`: default preonly + Cholesky with MUMPS). Both parts sit in one Python preconditioner
+(BandComposite), which forms the residual between them on the band's rows only, and reads a Parts flag, so
+that System can keep their setups across a new search that moved only the projections.
 
 Under GMRES the band's part starts with a Galerkin correction on the slip modes (SlipCorrection,
 assembly.slip_modes; scene key solver.contact_slip_modes): bodies in frictionless contact slide on each other
@@ -90,10 +90,9 @@ def band_dofs(K, couplings, layers=1):
 
 
 class Parts:
-    """What the two parts of a band composite share: keep = True leaves their setups as they are however the
-    operator changes (System decides: a new search that moved only the projections). PETSc's own reuse flag
-    cannot say it: the composite passes it down to its parts at every application, and SNES resets it after
-    every Jacobian."""
+    """What System tells a band composite: keep = True leaves the setups of its multigrid and band as they are
+    however the operator changes (a new search that moved only the projections). PETSc's own reuse flag
+    cannot say it: SNES resets it after every Jacobian."""
 
     def __init__(self):
         self.keep = False
@@ -112,15 +111,15 @@ def _runs(positions, gap=RUN_GAP):
 
 class SlipCorrection:
     """A Galerkin correction on a coarse space Z (assembly.slip_modes: blocks of modes, each on its body's
-    owned dofs): c = (Z^T P Z)^-1 Z^T r, then the rest r - P Z c goes on to the next solver and Z c is added
-    to its answer. Z and P Z are kept dense on a few slices of the local dofs (P Z from the setup, where it is
-    nonzero: the body and, through the contact rows, the dofs facing it): an application costs no product
-    with the operator and one reduction."""
+    owned dofs): c = (Z^T P Z)^-1 Z^T r, after which the band's solve takes r - P Z c and Z c is added to its
+    answer. Z and P Z are kept dense on a few slices of the local dofs (P Z from the setup, where it is
+    nonzero: the body and, through the contact rows, the dofs facing it), P Z also on the band's rows: an
+    application costs no product with the operator and one reduction."""
 
     def __init__(self, blocks):
         self.n_modes = [len(values) for _, values in blocks]
         self.Z = [self._dense(cols, values) for cols, values in blocks]   # per block: [(slice, values there)]
-        self.PZ = self.E_inv = self.rest = None
+        self.PZ = self.PZ_band = self.E_inv = None
 
     @staticmethod
     def _dense(positions, values):
@@ -133,7 +132,8 @@ class SlipCorrection:
             pieces.append((run, dense))
         return pieces
 
-    def set_up(self, P):
+    def set_up(self, P, band_rows):
+        """P Z and the coarse matrix Z^T P Z for the operator P; `band_rows`: the band's local positions."""
         z, pz = P.createVecs()
         products = []
         for pieces, m in zip(self.Z, self.n_modes):
@@ -147,11 +147,13 @@ class SlipCorrection:
                 PZ[k] = pz.getArray()
             products.append(PZ)
         z.destroy()
+        pz.destroy()
         self.PZ = []
         for PZ in products:
             nonzero = np.flatnonzero(np.any(PZ != 0.0, axis=0))
             self.PZ.append(self._dense(nonzero, PZ[:, nonzero]))
-        self.comm = pz.getComm().tompi4py()
+        self.PZ_band = np.concatenate([PZ[:, band_rows] for PZ in products])
+        self.comm = P.getComm().tompi4py()
         # a rank may hold none of a body's dofs: its blocks start from zeros
         E = self.comm.allreduce(np.block([[sum((values @ PZ[:, run].T for run, values in pieces),
                                                np.zeros((m, len(PZ)))) for PZ in products]
@@ -160,88 +162,36 @@ class SlipCorrection:
         # a direction the operator leaves (nearly) free, or a mode zero on this body's supports alone, is dropped
         keep = lam > COARSE_CUTOFF * lam.max()
         self.E_inv = (Q[:, keep] / lam[keep]) @ Q[:, keep].T
-        if self.rest is not None:
-            self.rest.destroy()
-        self.rest = pz
 
-    def split(self, r):
-        """(c, the rest r - P Z c as a Vec this object owns) for a residual Vec r (collective)."""
-        ra = r.getArray(readonly=True)
-        zr = np.concatenate([sum((values @ ra[run] for run, values in pieces), np.zeros(m))
-                             for pieces, m in zip(self.Z, self.n_modes)])
-        c = np.split(self.E_inv @ self.comm.allreduce(zr), np.cumsum(self.n_modes)[:-1])
-        rest = self.rest.getArray()
-        rest[:] = ra
-        for ck, pieces in zip(c, self.PZ):
-            for run, values in pieces:
-                rest[run] -= ck @ values
-        return c, self.rest
+    def coefficients(self, x, y):
+        """c = (Z^T P Z)^-1 Z^T (x - P y) for Vecs x, y (collective), with Z^T P y = (P Z)^T y: P is symmetric
+        (K + G^T D G), so the residual x - P y itself is never formed."""
+        xa, ya = x.getArray(readonly=True), y.getArray(readonly=True)
+        zr = np.concatenate([sum((values @ xa[run] for run, values in Z), np.zeros(m))
+                             - sum((values @ ya[run] for run, values in PZ), np.zeros(m))
+                             for Z, PZ, m in zip(self.Z, self.PZ, self.n_modes)])
+        return self.E_inv @ self.comm.allreduce(zr)
 
     def add(self, c, y):
         """y += Z c."""
         ya = y.getArray()
-        for ck, pieces in zip(c, self.Z):
+        for ck, pieces in zip(np.split(c, np.cumsum(self.n_modes)[:-1]), self.Z):
             for run, values in pieces:
                 ya[run] += ck @ values
 
     def modes(self):
         return sum(self.n_modes)
 
-    def destroy(self):
-        if self.rest is not None:
-            self.rest.destroy()
-
-
-class MultigridPart:
-    """PCPYTHON context: the band composite's multigrid (hypre or gamg, tuned by -qsc_pc_*), set up again
-    unless parts.keep; `soften(P)`, if given, is a context in which P is the operator BoomerAMG is to be set
-    up on (System.softened)."""
-
-    def __init__(self, inner, parts, soften=None):
-        self.inner, self.parts = inner, parts
-        self.soften = soften
-        self.ready = False
-
-    def setUp(self, pc):
-        keep = self.parts.keep and self.ready
-        self.inner.setReusePreconditioner(keep)
-        if keep:
-            return
-        A, P = pc.getOperators()
-        self.inner.setOperators(A, P)
-        with self.soften(P) if self.soften else nullcontext():
-            self.inner.setUp()
-        # set up on the softened operator: P's values changed and changed back, so the inner PC, which records
-        # P's state, must not redo its setup at its next application
-        self.inner.setReusePreconditioner(self.soften is not None)
-        self.ready = True
-
-    def apply(self, pc, x, y):
-        self.inner.apply(x, y)
-
-    def view(self, pc, viewer):
-        self.inner.view(viewer)
-
-    def destroy(self, pc=None):
-        try:
-            self.inner.destroy()
-        except PETSc.Error:
-            # after a failed setup hypre's error flag stays set and every later hypre call fails, its destroy
-            # included (a failed run is released before exit: cli.release); the process ends without it
-            pass
-
 
 class BandSolve:
-    """PCPYTHON context: the exact solve on the band, y = J_bb^-1 x on the band dofs and 0 elsewhere.
+    """The exact solve on the band: y_b = J_bb^-1 x_b on this rank's band dofs (all owned, so the band's Vecs
+    are slices of the whole ones).
 
     One factorization of the band's submatrix across all ranks (MUMPS Cholesky by default, options
     -qsc_band_*): where the partition cuts the contact interface, overlapping per-rank blocks summed
-    their corrections and cost a third more iterations (two cubes, 70k dofs: 123 against 83). Not
-    factored again while parts.keep."""
+    their corrections and cost a third more iterations (two cubes, 70k dofs: 123 against 83)."""
 
-    def __init__(self, band, comm, parts=None, slip=None):
-        self.parts = parts or Parts()
-        self.slip = slip                 # a SlipCorrection made before the band's solve, or None
+    def __init__(self, band, comm):
         self.iset = PETSc.IS().createGeneral(band, comm=comm)
         ksp = PETSc.KSP().create(comm=comm)
         ksp.setOptionsPrefix("qsc_band_")
@@ -252,43 +202,114 @@ class BandSolve:
         # rank's Python while the others wait in the factorization
         set_from_options(ksp, "contact band's solve (-qsc_band_*)")
         self.ksp = ksp
-        self.sub = self.scatter = self.xb = self.yb = None
+        self.sub = self.xb = self.yb = self.rows = None
 
-    def setUp(self, pc):
-        if self.parts.keep and self.sub is not None:
-            return
-        _, P = pc.getOperators()
+    def set_up(self, P):
         self.sub = P.createSubMatrix(self.iset, self.iset, submat=self.sub)
         self.ksp.setOperators(self.sub)
-        if self.scatter is None:
+        if self.xb is None:
             self.xb, self.yb = self.sub.createVecs()
-            whole = P.createVecRight()
-            self.scatter = PETSc.Scatter().create(whole, self.iset, self.xb, None)
-            whole.destroy()
+            self.rows = self.iset.getIndices() - P.getOwnershipRange()[0]   # local positions
         self.ksp.setUp()
-        if self.slip is not None:
-            self.slip.set_up(P)
 
-    def apply(self, pc, x, y):
-        if self.slip is not None:
-            c, x = self.slip.split(x)
-        self.scatter.scatter(x, self.xb, PETSc.InsertMode.INSERT, PETSc.ScatterMode.FORWARD)
+    def apply(self, x, y):
+        """y = the band's solve of x's band entries, 0 elsewhere (Vecs of the whole system)."""
+        self.xb.getArray()[:] = x.getArray(readonly=True)[self.rows]
         self.ksp.solve(self.xb, self.yb)
         y.set(0.0)
-        self.scatter.scatter(self.yb, y, PETSc.InsertMode.INSERT, PETSc.ScatterMode.REVERSE)
-        if self.slip is not None:
-            self.slip.add(c, y)
+        y.getArray()[self.rows] = self.yb.getArray(readonly=True)
 
-    def view(self, pc, viewer):
-        if self.slip is not None:
-            viewer.printfASCII(f"Galerkin correction on {self.slip.modes()} slip modes, then the band's solve "
-                               "(qsc_petsc.assembly.slip_modes)\n")
-        self.ksp.view(viewer)
-
-    def destroy(self, pc=None):
-        for obj in (self.ksp, self.sub, self.scatter, self.xb, self.yb, self.iset, self.slip):
+    def destroy(self):
+        for obj in (self.ksp, self.sub, self.xb, self.yb, self.iset):
             if obj is not None:
                 obj.destroy()
+
+
+class BandComposite:
+    """PCPYTHON context: the multigrid M (hypre or gamg, tuned by -qsc_pc_*), then the band's solve B,
+    multiplicatively: y = M x, then y += B (x - J y), the slip correction (if any) first in the second part;
+    `symmetric` (for CG) adds M (x - J y) again.
+
+    The residual x - J y between the two parts is read only on the band's rows (J's band rows times y, one
+    band-sized product) and, for the slip correction, through Z^T (x - J y) = Z^T x - (J Z)^T y: no product
+    with the whole J, which PETSc's multiplicative composite made at every application (212k dofs: ~10 ms of
+    an application's ~120 ms, docs/performance.md, session 15).
+
+    Set up again unless parts.keep: System keeps the setup across a new search that moved only the
+    projections (the band's rows of J are taken again all the same: they are a cheap copy). `soften(P)`, if
+    given, is a context in which P is the operator BoomerAMG is to be set up on (System.softened)."""
+
+    def __init__(self, inner, band, parts, slip=None, soften=None, symmetric=False):
+        self.inner, self.band, self.parts = inner, band, parts
+        self.slip, self.soften, self.symmetric = slip, soften, symmetric
+        self.ready = False
+        self.columns = self.band_rows = self.jy = self.work = None
+
+    def setUp(self, pc):
+        _, P = pc.getOperators()
+        if self.columns is None:
+            r0, r1 = P.getOwnershipRange()
+            self.columns = PETSc.IS().createStride(r1 - r0, first=r0, step=1, comm=P.getComm())
+        keep = self.parts.keep and self.ready
+        # J y on the band's rows: taken from the operator at hand, as the whole residual was
+        self.band_rows = P.createSubMatrix(self.band.iset, self.columns, submat=self.band_rows)
+        if self.jy is None:
+            self.jy = self.band_rows.createVecLeft()
+        self.inner.setReusePreconditioner(keep)
+        if keep:
+            return
+        self.inner.setOperators(P, P)
+        with self.soften(P) if self.soften else nullcontext():
+            self.inner.setUp()
+        # set up on the softened operator: P's values changed and changed back, so the inner PC, which records
+        # P's state, must not redo its setup at its next application
+        self.inner.setReusePreconditioner(self.soften is not None)
+        self.band.set_up(P)
+        if self.slip is not None:
+            self.slip.set_up(P, self.band.rows)
+        self.ready = True
+
+    def apply(self, pc, x, y):
+        self.inner.apply(x, y)
+        self.band_rows.mult(y, self.jy)
+        rb = self.band.xb.getArray()
+        rb[:] = x.getArray(readonly=True)[self.band.rows]
+        rb -= self.jy.getArray(readonly=True)
+        c = None
+        if self.slip is not None:
+            c = self.slip.coefficients(x, y)
+            rb -= c @ self.slip.PZ_band
+        self.band.ksp.solve(self.band.xb, self.band.yb)
+        y.getArray()[self.band.rows] += self.band.yb.getArray(readonly=True)
+        if c is not None:
+            self.slip.add(c, y)
+        if self.symmetric:
+            if self.work is None:
+                self.work = (y.duplicate(), y.duplicate())
+            r, t = self.work
+            pc.getOperators()[1].mult(y, r)
+            r.aypx(-1.0, x)
+            self.inner.apply(r, t)
+            y.axpy(1.0, t)
+
+    def view(self, pc, viewer):
+        viewer.printfASCII(f"qsc_petsc band composite ({'symmetric ' if self.symmetric else ''}multiplicative): "
+                           "the multigrid, then" + (f" a Galerkin correction on {self.slip.modes()} slip modes and"
+                                                    if self.slip is not None else "") + " the band's solve\n")
+        self.inner.view(viewer)
+        self.band.ksp.view(viewer)
+
+    def destroy(self, pc=None):
+        for obj in (self.columns, self.band_rows, self.jy, *(self.work or ())):
+            if obj is not None:
+                obj.destroy()
+        self.band.destroy()
+        try:
+            self.inner.destroy()
+        except PETSc.Error:
+            # after a failed setup hypre's error flag stays set and every later hypre call fails, its destroy
+            # included (a failed run is released before exit: cli.release); the process ends without it
+            pass
 
 
 def amg_type():
@@ -305,32 +326,26 @@ def wants_band(mode, has_pairs):
 
 
 def install_band_pc(ksp, band, comm, coarse=None, soften=None):
-    """Give ksp a fresh composite PC: the multigrid, then the exact solve on the contact band (BandSolve), whose
-    dofs (this rank's, from band_dofs) are `band`; `coarse` (assembly.slip_modes' blocks, or None) gives the
-    band's solve a Galerkin correction first (SlipCorrection), except under a named CG (the correction is not
-    symmetric); `soften` (a context, System.softened) is where BoomerAMG is set up (the multigrid must be hypre).
+    """Give ksp a fresh band composite (BandComposite): the multigrid, then the exact solve on the contact band
+    (BandSolve), whose dofs (this rank's, from band_dofs) are `band`; `coarse` (assembly.slip_modes' blocks,
+    or None) gives the band's solve a Galerkin correction first (SlipCorrection), except under a named CG (the
+    correction is not symmetric); `soften` (a context, System.softened) is where BoomerAMG is set up (the
+    multigrid must be hypre).
 
     When the options name no KSP, it becomes GMRES (right-preconditioned, as the true-residual test
     needs) with the multiplicative composite, one V-cycle per iteration; a named CG gets the
     symmetric-multiplicative one (so CG stays valid, at two V-cycles per iteration), any other KSP the
-    multiplicative one. Returns the global number of band dofs and the Parts the two share (None without a
+    multiplicative one. Returns the global number of band dofs and the Parts the composite reads (None without a
     band). A search whose band and Jacobian pattern are the last one's keeps the PC it has
     (System.set_terms); any other gets a fresh one: the band follows the new rows."""
     if comm.allreduce(len(band)) == 0:
         return 0, None                  # no row within reach: nothing stiff to take out, plain options
     krylov = option_value("ksp_type")
     added = insert_options(HYPRE_DEFAULTS) if amg_type() == "hypre" else {}   # read once below, then removed
-    pc = PETSc.PC().create(comm=comm)
-    pc.setOptionsPrefix("qsc_")
-    pc.setType("composite")
     if krylov is None:
         ksp.setType("gmres")             # one V-cycle per iteration (CG needs the symmetric form: two)
         ksp.setGMRESRestart(GMRES_RESTART)
         ksp.setPCSide(PETSc.PC.Side.RIGHT)   # left-preconditioned GMRES cannot test the true residual
-    pc.setCompositeType(PETSc.PC.CompositeType.SYMMETRIC_MULTIPLICATIVE if krylov == "cg"
-                        else PETSc.PC.CompositeType.MULTIPLICATIVE)
-    pc.addCompositePCType("python")
-    pc.addCompositePCType("python")
     amg = PETSc.PC().create(comm=comm)
     amg.setType(amg_type())
     amg.setOptionsPrefix("qsc_")         # -qsc_pc_hypre_* / -qsc_pc_gamg_* tune it as they tune a plain PC
@@ -338,14 +353,16 @@ def install_band_pc(ksp, band, comm, coarse=None, soften=None):
     remove_options(added)               # BoomerAMG has read them
     parts = Parts()
     slip = SlipCorrection(coarse) if coarse and krylov != "cg" else None
-    pc.getCompositePC(0).setPythonContext(MultigridPart(amg, parts, soften))
-    pc.getCompositePC(1).setPythonContext(BandSolve(band, comm, parts, slip))
+    pc = PETSc.PC().create(comm=comm)
+    pc.setOptionsPrefix("qsc_")
+    pc.setType("python")
+    pc.setPythonContext(BandComposite(amg, BandSolve(band, comm), parts, slip, soften, symmetric=krylov == "cg"))
     ksp.setPC(pc)
     return comm.allreduce(len(band)), parts
 
 
 def multigrid(pc):
     """The multigrid PC of a band composite (install_band_pc), else None."""
-    if pc.getType() != "composite":
+    if pc.getType() != "python" or not isinstance(pc.getPythonContext(), BandComposite):
         return None
-    return pc.getCompositePC(0).getPythonContext().inner
+    return pc.getPythonContext().inner

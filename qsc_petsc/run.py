@@ -25,7 +25,7 @@ _LIVE_RUNS = []
 @atexit.register      # registered after petsc4py's import, so it runs before petsc4py finalizes PETSc
 def _destroy_live_runs():
     """Destroy the runs an in-process caller left alive: at PetscFinalize, PETSc's own cleanup of their
-    solver objects (a composite preconditioner with a Python part) crashed with SEGV after the results
+    solver objects (the contact band's Python preconditioner) crashed with SEGV after the results
     were written."""
     for ref in _LIVE_RUNS:
         run = ref()

@@ -57,7 +57,7 @@ def test_search_with_the_same_coupling_keeps_jacobian_and_band(tmp_path, monkeyp
                              SMALL + ["contact.0.reuse_tolerance=0"])
     assert summary["status"] == "ok" and len(seen) == 2
     (j1, pc1, kind, local), (j2, pc2, _, _) = seen
-    assert kind == "composite" and (j1, pc1) == (j2, pc2)
+    assert kind == "python" and (j1, pc1) == (j2, pc2)
     assert local == [False, True, True]                 # contact[0], die[0], die[1]
     assert run.system.band_parts.keep                   # the second increment kept the first one's setup
     u = run.u.getArray().copy()

@@ -4,6 +4,7 @@ iterations with CG + GAMG or BoomerAMG, on 1, 2 and 3 ranks (interface split acr
 import numpy as np
 import pytest
 from conftest import CONFIGS, all_close, scene_without_petsc
+from mpi4py import MPI
 
 MESHES = ["petsc.ksp_rtol=1e-10", "output.xdmf=false", "bodies.0.mesh.cells=[4,4,2]", "bodies.1.mesh.cells=[7,7,2]"]
 ITERATIVE = ["petsc.ksp_type=cg", *MESHES]
@@ -82,8 +83,7 @@ def test_band_is_one_solve_across_ranks(comm, mpi_tmp):
               log=lambda *a: None)
     run.execute()
     ksp = run.system.snes.getKSP()
-    exact = ksp.getPC().getCompositePC(1)
-    band = exact.getPythonContext()
+    band = ksp.getPC().getPythonContext().band
     assert isinstance(band, BandSolve) and band.ksp.getPC().getType() == "lu"
     dofs = band.iset.getIndices()
     r0, r1 = run.system.J.getOwnershipRange()
@@ -97,7 +97,7 @@ def test_band_is_one_solve_across_ranks(comm, mpi_tmp):
     off = np.setdiff1d(np.arange(r0, r1), dofs) - r0
     x.getArray()[off] = 0.0
     J.mult(x, Jx)
-    band.apply(exact, Jx, y)
+    band.apply(Jx, y)
     assert all_close(comm, np.allclose(y.getArray(), x.getArray(), rtol=0, atol=1e-8 * x.norm(PETSc.NormType.INFINITY)))
     run.destroy()
 
@@ -149,8 +149,53 @@ def test_slip_modes_only_where_the_preconditioner_may_be_unsymmetric(comm, mpi_t
     run = Run(load_scene(scene_without_petsc(mpi_tmp), ["output.xdmf=false", f"petsc.ksp_type={krylov}"]), comm,
               mpi_tmp / "out", log=lambda *a: None)
     assert run.execute()["status"] == "ok"
-    band = run.system.snes.getKSP().getPC().getCompositePC(1).getPythonContext()
-    assert (band.slip is not None) == (krylov == "gmres")
+    composite = run.system.snes.getKSP().getPC().getPythonContext()
+    assert (composite.slip is not None) == (krylov == "gmres")
+    run.destroy()
+
+
+@pytest.mark.parametrize("krylov", ["gmres", "cg"])
+def test_band_composite_is_the_multiplicative_composite(comm, mpi_tmp, krylov):
+    """BandComposite forms the residual between its parts on the band's rows only (and Z^T r from J Z): its
+    application is the plain multiplicative composite's, y = M x, r = x - J y, c = (Z^T J Z)^-1 Z^T r,
+    y += Z c + B (r - J Z c) (and under CG y += M (x - J y) again), with every residual formed in full."""
+    from qsc_petsc.run import Run
+    from qsc_petsc.scene import load_scene
+    run = Run(load_scene(scene_without_petsc(mpi_tmp), ["output.xdmf=false", f"petsc.ksp_type={krylov}"]), comm,
+              mpi_tmp / "out", log=lambda *a: None)
+    assert run.execute()["status"] == "ok"
+    pc = run.system.snes.getKSP().getPC()
+    composite, J = pc.getPythonContext(), run.system.J
+    run.system.band_parts.keep = False
+    composite.setUp(pc)                       # every part on the J at hand
+    x, y = J.createVecs()
+    x.setRandom()
+    composite.apply(pc, x, y)
+
+    ref, r, t = x.duplicate(), x.duplicate(), x.duplicate()
+    composite.inner.apply(x, ref)
+    J.mult(ref, r)
+    r.aypx(-1.0, x)                           # r = x - J y
+    if composite.slip is not None:
+        Z = np.zeros((composite.slip.modes(), len(r.getArray())))
+        for k, (cols, values) in enumerate(run.system.slip_modes):
+            Z[6 * k:6 * k + 6, cols] = values
+        c = composite.slip.E_inv @ comm.allreduce(Z @ r.getArray())
+        t.getArray()[:] = c @ Z
+        ref.axpy(1.0, t)                      # y += Z c
+        Jt = t.duplicate()
+        J.mult(t, Jt)
+        r.axpy(-1.0, Jt)                      # r -= J Z c
+    composite.band.apply(r, t)
+    ref.axpy(1.0, t)
+    if krylov == "cg":
+        J.mult(ref, r)
+        r.aypx(-1.0, x)
+        composite.inner.apply(r, t)
+        ref.axpy(1.0, t)
+    scale = comm.allreduce(float(np.abs(ref.getArray()).max()), op=MPI.MAX)
+    assert all_close(comm, np.allclose(y.getArray(), ref.getArray(), rtol=0, atol=1e-9 * scale))
+    assert (composite.slip is not None) == (krylov == "gmres")
     run.destroy()
 
 
