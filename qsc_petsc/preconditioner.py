@@ -206,6 +206,11 @@ class BandSolve:
 
     def set_up(self, P):
         self.sub = P.createSubMatrix(self.iset, self.iset, submat=self.sub)
+        # a principal submatrix of J = K + G^T D G (D >= 0): symmetric positive definite, so MUMPS factors it
+        # without pivoting. Its symmetric-indefinite mode (PETSc's default for Cholesky) returned NaN now
+        # and then on the same matrix: two cubes, 212k dofs, contact_band_layers = 0, 4 runs of 6 (none of 4
+        # with this flag, docs/performance.md session 15)
+        self.sub.setOption(PETSc.Mat.Option.SPD, True)
         self.ksp.setOperators(self.sub)
         if self.xb is None:
             self.xb, self.yb = self.sub.createVecs()
