@@ -12,7 +12,7 @@ GMRES unless `-qsc_ksp_type` names one. BoomerAMG's classical coarsening follows
 couplings across the interface: on the two cubes (70k dofs), CG with the band needed 17 iterations
 per Newton step with BoomerAMG and 54-79 with GAMG (docs/performance.md).
 GMRES takes the multiplicative composite, one V-cycle per iteration; CG needs the symmetric one, two.
-BoomerAMG's settings (HMIS coarsening, ext+i interpolation, at most 4 weights per row, strength
+BoomerAMG's settings (PMIS coarsening, ext+i interpolation, at most 4 weights per row, strength
 threshold 0.5, one level of aggressive coarsening: the usual 3-D elasticity choices; one forward
 l1-Gauss-Seidel sweep down and one backward sweep up, in the rows' order) are defaults that any `-qsc_pc_hypre_*` option overrides. The multigrid reads the system's own
 options (`-qsc_pc_*`); the band is one submatrix across all ranks, factored once per new Jacobian
@@ -41,8 +41,10 @@ AMG_TYPES = ("hypre", "gamg")        # the band's partner: the first is the defa
 # hybrid Gauss-Seidel (Jacobi between ranks) need not (plain CG + BoomerAMG stopped with an indefinite
 # preconditioner on 3 ranks, patch test). Two cubes, 212k dofs: 22.7 s against 27.4 s (docs/performance.md).
 # The sweeps take the rows in their order (no_CF), not hypre's C-points-then-F-points: the same Krylov counts
-# (+-1, Hertz +2 %) at 10-14 % less time per V-cycle (docs/performance.md, session 14).
-HYPRE_DEFAULTS = {"pc_hypre_boomeramg_coarsen_type": "HMIS", "pc_hypre_boomeramg_interp_type": "ext+i",
+# (+-1, Hertz +2 %) at 10-14 % less time per V-cycle (docs/performance.md, session 14). PMIS coarsening, not
+# HMIS: coarser grids (operator complexity 1.29 against 1.42 at 212k dofs) at the same Krylov counts (+-3 on
+# every scene measured), 8-12 % less time in the preconditioner at 212k and 808k (session 15).
+HYPRE_DEFAULTS = {"pc_hypre_boomeramg_coarsen_type": "PMIS", "pc_hypre_boomeramg_interp_type": "ext+i",
                   "pc_hypre_boomeramg_P_max": "4", "pc_hypre_boomeramg_strong_threshold": "0.5",
                   "pc_hypre_boomeramg_agg_nl": "1",
                   "pc_hypre_boomeramg_relax_type_down": "l1-Gauss-Seidel",

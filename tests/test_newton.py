@@ -122,7 +122,7 @@ def test_krylov_stops_at_the_newton_target(tmp_path):
 
 
 def test_named_boomeramg_gets_the_tuned_defaults(tmp_path):
-    """-qsc_pc_type hypre without contact pairs gets the band's BoomerAMG defaults (HMIS, l1-Gauss-Seidel),
+    """-qsc_pc_type hypre without contact pairs gets the band's BoomerAMG defaults (PMIS, l1-Gauss-Seidel),
     which leave the options database once read; an option the user sets wins."""
     from qsc_petsc.preconditioner import HYPRE_DEFAULTS
 
@@ -136,7 +136,7 @@ def test_named_boomeramg_gets_the_tuned_defaults(tmp_path):
         return path.read_text()
 
     text = pc_view(["petsc.pc_type=hypre"])
-    assert "HMIS" in text and "l1-Gauss-Seidel" in text
+    assert "PMIS" in text and "l1-Gauss-Seidel" in text
     assert not any(PETSc.Options().hasName("qsc_" + key) for key in HYPRE_DEFAULTS)
     assert "PMIS" in pc_view(["petsc.pc_type=hypre", "petsc.pc_hypre_boomeramg_coarsen_type=PMIS"])
 
