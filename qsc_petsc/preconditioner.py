@@ -136,20 +136,23 @@ class SlipCorrection:
 
     def set_up(self, P, band_rows):
         """P Z and the coarse matrix Z^T P Z for the operator P; `band_rows`: the band's local positions."""
-        z, pz = P.createVecs()
-        products = []
-        for pieces, m in zip(self.Z, self.n_modes):
-            PZ = np.empty((m, pz.getLocalSize()))
-            for k in range(m):
-                za = z.getArray()
-                za[:] = 0.0
-                for run, values in pieces:
-                    za[run] = values[k]
-                P.mult(z, pz)
-                PZ[k] = pz.getArray()
-            products.append(PZ)
-        z.destroy()
-        pz.destroy()
+        # P Z by one product with Z as a dense matrix (P read once, not once per mode)
+        n, N = P.getLocalSize()[1], P.getSize()[1]
+        Z = np.zeros((n, self.modes()), order="F")
+        for pieces, first in zip(self.Z, np.cumsum([0] + self.n_modes[:-1])):
+            for run, values in pieces:
+                Z[run, first:first + len(values)] = values.T
+        Zd = PETSc.Mat().createDense([(n, N), (PETSc.DECIDE, self.modes())], array=Z.ravel(order="F"),
+                                     comm=P.getComm())
+        Zd.assemble()
+        PZd = P.matMult(Zd)
+        PZ_all = np.empty((self.modes(), n))
+        for k in range(self.modes()):
+            PZ_all[k] = PZd.getDenseColumnVec(k).getArray(readonly=True)
+            PZd.restoreDenseColumnVec(k)
+        PZd.destroy()
+        Zd.destroy()
+        products = np.split(PZ_all, np.cumsum(self.n_modes)[:-1])
         self.PZ = []
         for PZ in products:
             nonzero = np.flatnonzero(np.any(PZ != 0.0, axis=0))
