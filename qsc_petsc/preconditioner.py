@@ -242,12 +242,14 @@ class BandComposite:
 
     The residual x - J y between the two parts is read only on the band's rows (J's band rows times y, one
     band-sized product) and, for the slip correction, through Z^T (x - J y) = Z^T x - (J Z)^T y: no product
-    with the whole J, which PETSc's multiplicative composite made at every application (212k dofs: ~10 ms of
-    an application's ~120 ms, docs/performance.md, session 15).
+    with the whole J, which PETSc's multiplicative composite made at every application (212k dofs, one
+    -log_view pair: MatMult 1.23 -> 0.80 s over the run's 293 calls, SNESSolve 7.01 -> 6.50 s; docs/performance.md,
+    session 15).
 
     Set up again unless parts.keep: System keeps the setup across a new search that moved only the
-    projections (the band's rows of J are taken again all the same: they are a cheap copy). `soften(P)`, if
-    given, is a context in which P is the operator BoomerAMG is to be set up on (System.softened)."""
+    projections. The band's rows of J are taken again all the same (a cheap copy), so that the residual is the
+    current J's, as the composite's was; the slip correction's J Z stays the setup's. `soften(P)`, if given, is
+    a context in which P is the operator BoomerAMG is to be set up on (System.softened)."""
 
     def __init__(self, inner, band, parts, slip=None, soften=None, symmetric=False):
         self.inner, self.band, self.parts = inner, band, parts
