@@ -121,7 +121,7 @@ class SlipCorrection:
     def __init__(self, blocks):
         self.n_modes = [len(values) for _, values in blocks]
         self.Z = [self._dense(cols, values) for cols, values in blocks]   # per block: [(slice, values there)]
-        self.PZ = self.PZ_band = self.E_inv = None
+        self.PZ = self.PZ_band = self.E_inv = self.Zd = None
 
     @staticmethod
     def _dense(positions, values):
@@ -136,33 +136,30 @@ class SlipCorrection:
 
     def set_up(self, P, band_rows):
         """P Z and the coarse matrix Z^T P Z for the operator P; `band_rows`: the band's local positions."""
-        # P Z by one product with Z as a dense matrix (P read once, not once per mode)
-        n, N = P.getLocalSize()[1], P.getSize()[1]
-        Z = np.zeros((n, self.modes()), order="F")
-        for pieces, first in zip(self.Z, np.cumsum([0] + self.n_modes[:-1])):
-            for run, values in pieces:
-                Z[run, first:first + len(values)] = values.T
-        Zd = PETSc.Mat().createDense([(n, N), (PETSc.DECIDE, self.modes())], array=Z.ravel(order="F"),
-                                     comm=P.getComm())
-        Zd.assemble()
-        PZd = P.matMult(Zd)
-        PZ_all = np.empty((self.modes(), n))
+        n = P.getLocalSize()[1]
+        if self.Zd is None:
+            # Z as one dense matrix (its values never change: made once), so that P Z is one product (P read
+            # once, not once per mode)
+            self.Z_dense = np.zeros((n, self.modes()), order="F")
+            for pieces, first in zip(self.Z, np.cumsum([0] + self.n_modes[:-1])):
+                for run, values in pieces:
+                    self.Z_dense[run, first:first + len(values)] = values.T
+            self.Zd = PETSc.Mat().createDense([(n, P.getSize()[1]), (PETSc.DECIDE, self.modes())],
+                                              array=self.Z_dense.ravel(order="F"), comm=P.getComm())
+            self.Zd.assemble()
+        PZd = P.matMult(self.Zd)
+        PZ = np.empty((self.modes(), n))
         for k in range(self.modes()):
-            PZ_all[k] = PZd.getDenseColumnVec(k).getArray(readonly=True)
+            PZ[k] = PZd.getDenseColumnVec(k).getArray(readonly=True)
             PZd.restoreDenseColumnVec(k)
         PZd.destroy()
-        Zd.destroy()
-        products = np.split(PZ_all, np.cumsum(self.n_modes)[:-1])
         self.PZ = []
-        for PZ in products:
-            nonzero = np.flatnonzero(np.any(PZ != 0.0, axis=0))
-            self.PZ.append(self._dense(nonzero, PZ[:, nonzero]))
-        self.PZ_band = np.concatenate([PZ[:, band_rows] for PZ in products])
+        for block in np.split(PZ, np.cumsum(self.n_modes)[:-1]):
+            nonzero = np.flatnonzero(np.any(block != 0.0, axis=0))
+            self.PZ.append(self._dense(nonzero, block[:, nonzero]))
+        self.PZ_band = PZ[:, band_rows]
         self.comm = P.getComm().tompi4py()
-        # a rank may hold none of a body's dofs: its blocks start from zeros
-        E = self.comm.allreduce(np.block([[sum((values @ PZ[:, run].T for run, values in pieces),
-                                               np.zeros((m, len(PZ)))) for PZ in products]
-                                          for pieces, m in zip(self.Z, self.n_modes)]))
+        E = self.comm.allreduce(self.Z_dense.T @ PZ.T)           # Z^T P Z
         lam, Q = np.linalg.eigh(0.5 * (E + E.T))
         # a direction the operator leaves (nearly) free, or a mode zero on this body's supports alone, is dropped
         keep = lam > COARSE_CUTOFF * lam.max()
@@ -186,6 +183,10 @@ class SlipCorrection:
 
     def modes(self):
         return sum(self.n_modes)
+
+    def destroy(self):
+        if self.Zd is not None:
+            self.Zd.destroy()
 
 
 class BandSolve:
@@ -316,6 +317,8 @@ class BandComposite:
             if obj is not None:
                 obj.destroy()
         self.band.destroy()
+        if self.slip is not None:
+            self.slip.destroy()
         try:
             self.inner.destroy()
         except PETSc.Error:

@@ -138,7 +138,7 @@ def test_named_boomeramg_gets_the_tuned_defaults(tmp_path):
     text = pc_view(["petsc.pc_type=hypre"])
     assert "PMIS" in text and "l1-Gauss-Seidel" in text
     assert not any(PETSc.Options().hasName("qsc_" + key) for key in HYPRE_DEFAULTS)
-    assert "PMIS" in pc_view(["petsc.pc_type=hypre", "petsc.pc_hypre_boomeramg_coarsen_type=PMIS"])
+    assert "HMIS" in pc_view(["petsc.pc_type=hypre", "petsc.pc_hypre_boomeramg_coarsen_type=HMIS"])
 
 
 def test_no_solve_ends_in_the_closed_start(tmp_path):
