@@ -156,3 +156,64 @@ def test_degenerate_cell_fails_every_rank(comm):
         mesh.coords[v[4:], 2] = mesh.coords[v[0], 2]
     with pytest.raises(MeshError, match=f"hex cell {bad} "):
         assembly.stiffness_matrix(mesh, *assembly.cell_materials(mesh, scene))
+
+
+@pytest.mark.parametrize("path", ["element blocks", "box stencils"])
+def test_stencil_union_is_the_stiffness_on_the_widened_pattern(comm, path):
+    """J = K on the union of K's pattern and contact stencils (assembly.StencilUnion, made from CSR arrays)
+    shall have exactly MatAXPY's pattern and K's values, on any number of ranks: stencil entries inside K's
+    pattern, outside it, on other ranks' columns, in rows K's pattern ends before or starts after, in two
+    stencils that overlap; reset() shall put K's values back after J changed, and mark J changed."""
+    # unequal bodies: the ranks' cuts go through them, so K has off-diagonal parts
+    scene = load_scene(CONFIGS / "two_cubes_dies.toml", TWO_BODIES + ["bodies.0.mesh.cells=[4,4,3]"])
+    mesh = distribute_mesh(scene, comm)
+    if path == "box stencils":
+        K = assembly.lattice_stiffness_matrix(mesh, lattice.box_lattices(scene))
+    else:
+        K = assembly.stiffness_matrix(mesh, *assembly.cell_materials(mesh, scene))
+    n = K.getSize()[0]
+    rng = np.random.default_rng(7 + comm.rank)
+    r0, r1 = K.getOwnershipRange()
+    rows = rng.integers(0, n, 60)
+    cols = rng.integers(0, n, 60)
+    # the first and last columns (before and after every row's own), a diagonal entry, and the same entry twice
+    rows = np.concatenate([rows, [r0 % n, (r1 - 1) % n, rows[0], rows[1]]])
+    cols = np.concatenate([cols, [0, n - 1, rows[0], cols[1]]])
+    stencils = [assembly.triplet_matrix(mesh, rows[:40], cols[:40], np.ones(40)),
+                assembly.triplet_matrix(mesh, rows[30:], cols[30:], np.ones(len(rows) - 30))]
+    if comm.size > 1:
+        assert comm.allreduce(len(K.getAttr("__csr__")[1][1]), op=MPI.MIN) > 0
+    union = assembly.StencilUnion(K, stencils)
+    J = union.J
+    ref = K.copy()                         # what set_terms made before: K + the stencils' pattern by MatAXPY
+    for S in stencils:
+        zero = S.copy()
+        zero.zeroEntries()
+        ref.axpy(1.0, zero, PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
+        zero.destroy()
+    got, _ = owned_dense(J, n)
+    want, _ = owned_dense(ref, n)
+    pattern = [np.repeat(np.arange(r1 - r0), np.diff(ia)) * n + ja
+               for ia, ja, _ in (J.getValuesCSR(), ref.getValuesCSR())]
+    assert all_close(comm, np.array_equal(pattern[0], pattern[1]) and np.array_equal(got, want))
+    assert comm.allreduce(int(J.getValuesCSR()[0][-1]), op=MPI.SUM) > comm.allreduce(
+        int(K.getValuesCSR()[0][-1]), op=MPI.SUM)
+    assert J.getBlockSize() == 3 and J.getNearNullSpace() == K.getNearNullSpace()
+    for S in stencils:
+        J.axpy(2.5, S, PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
+    changed, _ = owned_dense(J, n)
+    assert comm.allreduce(float(np.abs(changed - want).max(initial=0.0)), op=MPI.MAX) > 1.0
+    state = J.stateGet()
+    union.reset()
+    assert J.stateGet() > state
+    back, _ = owned_dense(J, n)
+    assert all_close(comm, np.array_equal(back, want))
+    x = J.createVecRight()
+    x.setRandom()
+    y, z = J.createVecLeft(), J.createVecLeft()
+    J.mult(x, y)
+    ref.mult(x, z)
+    y.axpy(-1.0, z)
+    assert y.norm() <= 1e-12 * z.norm()
+    for A in (ref, J, K, *stencils):
+        A.destroy()
