@@ -63,86 +63,11 @@ def plain_rows(A):
 def _stiffness_operator(size, csr, comm):
     """K from its CSR arrays (split diagonal / off-diagonal parts on several ranks), as both assemblies hand it
     over: block size 3, no new nonzeros, the plain row kernel."""
-    # the off-diagonal part's columns are global here; PETSc renumbers them in place at assembly, to positions
-    # in their sorted list (MatSetUpMultiply_MPIAIJ): that list is kept to read K's pattern back (StencilUnion)
-    offdiag_columns = np.unique(csr[1][1]) if comm.size > 1 else None
-    A = _operator_with_arrays(size, csr, comm)
-    A.setAttr("qsc_offdiag_columns", offdiag_columns)
-    A.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, True)
-    return A
-
-
-def _operator_with_arrays(size, csr, comm):
-    """An assembled MPIAIJ matrix on the given CSR arrays (PETSc uses them without copying), block size 3, the
-    plain row kernel."""
     A = PETSc.Mat().createAIJWithArrays(size, csr, comm=comm)
     A.setBlockSizes(3, 3)          # createAIJWithArrays ignores bsize; GAMG aggregates by it
+    A.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, True)
     plain_rows(A)
     return A
-
-
-def _csr_parts(A):
-    """The CSR arrays PETSc holds for a matrix made by createAIJWithArrays: [(rowptr, cols, values)], one per
-    part (diagonal, off-diagonal on several ranks); the arrays are the matrix's own storage."""
-    csr = A.getAttr("__csr__")
-    return [csr] if A.getComm().getSize() == 1 else list(csr)
-
-
-def _insertions(rowptr, cols, rows, new_cols):
-    """Where the (row, column) pairs absent from a CSR pattern (columns sorted in each row) go: positions in the
-    column array (for np.insert, ascending), the columns inserted there and their rows."""
-    if len(rows) == 0:
-        return np.zeros(0, np.int64), np.zeros(0, cols.dtype), np.zeros(0, np.int64)
-    touched = np.unique(rows)
-    lens = np.diff(rowptr)[touched]
-    first = np.cumsum(lens) - lens                # each touched row's place among the gathered entries
-    gathered = np.repeat(rowptr[touched] - first, lens) + np.arange(lens.sum())
-    width = int(max(cols.max(initial=0), new_cols.max(initial=0))) + 1
-    old = np.repeat(touched.astype(np.int64), lens) * width + cols[gathered]      # ascending: rows, then columns
-    new = np.unique(rows.astype(np.int64) * width + new_cols)
-    new = new[~np.isin(new, old, assume_unique=True)]
-    at = np.searchsorted(old, new)
-    row = new // width
-    return rowptr[row] + at - first[np.searchsorted(touched, row)], (new % width).astype(cols.dtype), row
-
-
-class StencilUnion:
-    """J = K on the union of K's pattern and a contact stencil (Mats with K's layout), made from CSR arrays:
-    PETSc's MatAXPY with a new pattern inserted every entry of K anew, row by row (1.8 s at 808k dofs, 2
-    ranks). reset() puts K's values back in J (its pattern kept) without MatAXPY either."""
-
-    def __init__(self, K, stencils):
-        comm = K.getComm()
-        r0, r1 = K.getOwnershipRange()
-        rows, cols = [np.zeros(0, np.int64)], [np.zeros(0, np.int64)]
-        for S in stencils:
-            ia, ja, _ = S.getValuesCSR()
-            rows.append(np.repeat(np.arange(r1 - r0, dtype=np.int64), np.diff(ia)))
-            cols.append(ja.astype(np.int64))
-        rows, cols = np.concatenate(rows), np.concatenate(cols)
-        diag = (cols >= r0) & (cols < r1)
-        pieces = [(rows[diag], cols[diag] - r0)]
-        if comm.getSize() > 1:
-            pieces.append((rows[~diag], cols[~diag]))
-        self.K_parts = _csr_parts(K)
-        self.at, csr = [], []
-        for i, ((rowptr, kcols, kvals), (r, c)) in enumerate(zip(self.K_parts, pieces)):
-            if i == 1:
-                kcols = K.getAttr("qsc_offdiag_columns")[kcols]      # global again
-            at, inserted, row = _insertions(rowptr, kcols, r, c)
-            shift = np.zeros(len(rowptr), np.int64)
-            np.cumsum(np.bincount(row, minlength=len(rowptr) - 1), out=shift[1:])
-            csr.append(((rowptr + shift).astype(PETSc.IntType), np.insert(kcols, at, inserted).astype(PETSc.IntType),
-                        np.insert(kvals, at, 0.0)))
-            self.at.append(at)
-        self.J = _operator_with_arrays(K.getSizes(), csr[0] if len(csr) == 1 else tuple(csr), comm)
-        self.J.setNearNullSpace(K.getNearNullSpace())
-
-    def reset(self):
-        """J's values set to K's (collective)."""
-        for at, (_, _, kvals), (_, _, jvals) in zip(self.at, self.K_parts, _csr_parts(self.J)):
-            jvals[:] = np.insert(kvals, at, 0.0)
-        self.J.assemble()         # a new state: the preconditioners see J changed
 
 
 BATCH = 1 << 19           # candidates (element blocks) summed per batch: ~40 MB of temporaries

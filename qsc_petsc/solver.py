@@ -174,7 +174,7 @@ class System:
         self.bc_local = (bc_dofs - self.u.getOwnershipRange()[0]).astype(np.int64)
         self.bc_dofs = bc_dofs.astype(PETSc.IntType)
         self.terms = []
-        self.J, self.union = K, None      # the Jacobian; StencilUnion when constraint terms widen K's pattern
+        self.J = K
         self.t = 0.0
         self.force_scale = 0.0     # max(|K u|, t |b|) at the last residual: what the Newton test is relative to
         self.prev_active = None
@@ -271,14 +271,24 @@ class System:
         kept = bool(terms) and self.J is not self.K and self.comm.allreduce(signature == self.stencil_signature,
                                                                              op=MPI.LAND)
         if not terms:
-            self._drop_jacobian()
+            self.J = self.K
         elif kept:
             # the new rows couple the same dofs as the last search's (a flat contact): J keeps its pattern
-            self._reset_to_stiffness()
+            self._reset_to_stiffness(self.J)
         else:
-            union = assembly.StencilUnion(self.K, coupling)
-            self._drop_jacobian()
-            self.J, self.union = union.J, union
+            J = self.K.copy()
+            if coupling:
+                pattern = coupling[0].copy()
+                for GtG in coupling[1:]:      # summed first: one pass over K's rows, not one per term
+                    pattern.axpy(1.0, GtG, PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
+                pattern.zeroEntries()
+                J.axpy(1.0, pattern, PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
+                pattern.destroy()
+                assembly.plain_rows(J)         # the new pattern's matrix is PETSc's, with its defaults
+            J.setNearNullSpace(self.K.getNearNullSpace())
+            if self.J is not self.K:
+                self.J.destroy()
+            self.J = J
         self.stencil_signature, self.rows_signature = signature, rows
         self.snes.setJacobian(self._jacobian, self.J, self.J)
         self.jacobian_d = [np.zeros_like(term.d) for term in terms]
@@ -334,7 +344,7 @@ class System:
         if changed.max() == 2:
             # a row opened: subtracting its penalty (1e2-1e10 x K) would leave round-off of that size in J,
             # enough to make a free body's singular J solvable and its iterates jump; rebuild from K instead
-            self._reset_to_stiffness()
+            self._reset_to_stiffness(J)
             held = [np.zeros_like(term.d) for term in self.terms]
             changed = np.ones_like(changed)
         else:
@@ -376,15 +386,10 @@ class System:
         C.zeroRowsColumns(self.bc_dofs, 0.0)
         return C
 
-    def _reset_to_stiffness(self):
+    def _reset_to_stiffness(self, J):
         """J's values set to K's, its pattern (K's and the contact stencil's) kept."""
-        self.union.reset()
-
-    def _drop_jacobian(self):
-        """J back to K (no constraint terms), the last J released."""
-        if self.J is not self.K:
-            self.J.destroy()
-        self.J, self.union = self.K, None
+        J.zeroEntries()
+        J.axpy(1.0, self.K, SUBSET)
 
     def _keep_or_rebuild_pc(self, j_changes):
         """Whether the band preconditioner stays as it is for the next linear solves (collective). The first
