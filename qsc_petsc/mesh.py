@@ -246,7 +246,12 @@ def distribute_mesh(scene, comm):
     if comm.size > 1 and chosen is None:
         # the default: coordinate bisection of the cells, all of which start on rank 0
         if comm.rank == 0:
-            part = coordinate_bisection(gm.points[gm.cells].mean(axis=1), comm.size)
+            bits = np.int64(0)
+            for pair in scene.contact:
+                for ref in (pair.slave, pair.master):
+                    bits |= np.int64(1) << np.int64(surface_names.index(ref))
+            part = coordinate_bisection(gm.points[gm.cells].mean(axis=1), comm.size,
+                                        contact=(gm.face_mask & bits).any(axis=1))
             sizes, points = np.bincount(part, minlength=comm.size), np.argsort(part, kind="stable")
         else:
             sizes, points = np.zeros(comm.size), np.zeros(0)

@@ -31,3 +31,36 @@ def test_fewer_cells_than_parts_and_ties():
     assert np.bincount(part, minlength=3).tolist() == [0, 1, 1]
     same = np.zeros((10, 3))
     assert coordinate_bisection(same, 2).tolist() == [0] * 5 + [1] * 5
+
+
+def stacked_boxes():
+    """A 4 x 4 x 4 box on another (z 4..8): centroids, and the cells on either side of the interface z = 4."""
+    x = box_centroids(4, 4, 8)
+    return x, np.abs(x[:, 2] - 4.0) < 1.0
+
+
+def test_contact_surfaces_are_cut_across():
+    """Two stacked boxes in contact at z = 4: the cut goes across the interface (along x, the first of the
+    interface's two equal spreads), not along it at mid-height as without contact; each part gets half of the
+    contact cells."""
+    x, contact = stacked_boxes()
+    part = coordinate_bisection(x, 2, contact)
+    assert np.bincount(part).tolist() == [64, 64]
+    assert x[part == 0, 0].max() < x[part == 1, 0].min()
+    assert np.bincount(part[contact]).tolist() == [16, 16]
+    assert coordinate_bisection(x, 2).tolist() == coordinate_bisection(x, 2, np.zeros(len(x), bool)).tolist()
+
+
+def test_contact_cuts_stop_at_the_aspect_limit():
+    """Four parts cut the interface into quarters (x, then y); a column more than SPLIT_ASPECT times longer than
+    the interface is wide is cut along its length instead."""
+    from qsc_petsc.partition import SPLIT_ASPECT
+    x, contact = stacked_boxes()
+    part = coordinate_bisection(x, 4, contact)
+    assert np.bincount(part[contact]).tolist() == [8, 8, 8, 8]
+    for length, across in ((int(SPLIT_ASPECT) + 1, True), (int(SPLIT_ASPECT) + 4, False)):
+        column = box_centroids(2, 2, length)          # extents 1, 1 and length - 1
+        at = np.abs(column[:, 2] - column[:, 2].mean()) < 1.0
+        part = coordinate_bisection(column, 2, at)
+        axis = 0 if across else 2
+        assert column[part == 0, axis].max() < column[part == 1, axis].min()

@@ -193,6 +193,16 @@ def test_failed_increment_is_cut_and_reported(comm, mpi_tmp):
         opts.delValue("qsc_snes_max_it")
 
 
+def test_default_partition_shares_the_interface(comm):
+    """The default partition (coordinate bisection) cuts across the contact surfaces of the stacked cubes: every
+    rank owns slave and master faces (it cut the stack at mid-height, the whole interface on one rank, before)."""
+    from qsc_petsc.mesh import distribute_mesh
+    from qsc_petsc.scene import load_scene
+    mesh = distribute_mesh(load_scene(CONFIGS / "two_cubes_dies.toml"), comm)
+    faces = [len(mesh.surface_faces(s)[0]) for s in ("upper.zmin", "lower.zmax")]
+    assert all_close(comm, min(comm.allreduce(f, op=MPI.MIN) for f in faces) > 0)
+
+
 def test_rank_without_contact_surface(comm, mpi_tmp):
     """With a bystander body partitioned in cell order, the last rank owns no contact surface, yet the
     contact results equal the serial ones (the other ranks split the interface between them)."""
