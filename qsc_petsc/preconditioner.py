@@ -223,12 +223,18 @@ class BandSolve:
             self.rows = self.iset.getIndices() - P.getOwnershipRange()[0]   # local positions
         self.ksp.setUp()
 
+    def solve(self, rhs):
+        """The band's solve of rhs (this rank's band entries, an array, in the order of `rows`); returns the
+        answer's array (the band's own: read it before the next solve)."""
+        self.xb.getArray()[:] = rhs
+        self.ksp.solve(self.xb, self.yb)
+        return self.yb.getArray(readonly=True)
+
     def apply(self, x, y):
         """y = the band's solve of x's band entries, 0 elsewhere (Vecs of the whole system)."""
-        self.xb.getArray()[:] = x.getArray(readonly=True)[self.rows]
-        self.ksp.solve(self.xb, self.yb)
+        answer = self.solve(x.getArray(readonly=True)[self.rows])
         y.set(0.0)
-        y.getArray()[self.rows] = self.yb.getArray(readonly=True)
+        y.getArray()[self.rows] = answer
 
     def destroy(self):
         for obj in (self.ksp, self.sub, self.xb, self.yb, self.iset):
@@ -285,15 +291,12 @@ class BandComposite:
     def apply(self, pc, x, y):
         self.inner.apply(x, y)
         self.band_rows.mult(y, self.jy)
-        rb = self.band.xb.getArray()
-        rb[:] = x.getArray(readonly=True)[self.band.rows]
-        rb -= self.jy.getArray(readonly=True)
+        rb = x.getArray(readonly=True)[self.band.rows] - self.jy.getArray(readonly=True)
         c = None
         if self.slip is not None:
             c = self.slip.coefficients(x, y)
             rb -= c @ self.slip.PZ_band
-        self.band.ksp.solve(self.band.xb, self.band.yb)
-        y.getArray()[self.band.rows] += self.band.yb.getArray(readonly=True)
+        y.getArray()[self.band.rows] += self.band.solve(rb)
         if c is not None:
             self.slip.add(c, y)
         if self.symmetric:
