@@ -7,8 +7,10 @@ deterministic and needs no cell graph (PETSc's graph partitioners build one firs
 With contact pairs, a cut goes across the contact surfaces rather than along them while the part
 is not much longer the other way (SPLIT_ASPECT): each rank then searches, builds rows for and
 factors the band of its share of the interface, instead of one rank doing all of it while the
-others wait (two cubes stacked, 212k dofs, 2 ranks: search and rows 1.2 -> 0.6 s, the run
-8.9-9.6 -> 8.2-8.4 s; docs/performance.md).
+others wait (two cubes stacked, 2 ranks, alternated runs: search and rows 0.75-1.17 -> 0.57-0.64 s
+at 212k dofs, the run 42.8 -> 36.7 s at 808k; docs/performance.md, session 16). A vertex on a cut
+goes to the higher rank, so a cut through both bodies balances owned dofs less well (1.008 -> 1.043
+there).
 """
 
 import numpy as np
