@@ -230,12 +230,6 @@ class BandSolve:
         self.ksp.solve(self.xb, self.yb)
         return self.yb.getArray(readonly=True)
 
-    def apply(self, x, y):
-        """y = the band's solve of x's band entries, 0 elsewhere (Vecs of the whole system)."""
-        answer = self.solve(x.getArray(readonly=True)[self.rows])
-        y.set(0.0)
-        y.getArray()[self.rows] = answer
-
     def destroy(self):
         for obj in (self.ksp, self.sub, self.xb, self.yb, self.iset):
             if obj is not None:
@@ -356,7 +350,8 @@ def install_band_pc(ksp, band, comm, coarse=None, soften=None):
     multiplicative one. Returns the global number of band dofs and the Parts the composite reads (None without a
     band). A search whose band and Jacobian pattern are the last one's keeps the PC it has
     (System.set_terms); any other gets a fresh one: the band follows the new rows."""
-    if comm.allreduce(len(band)) == 0:
+    n_band = comm.allreduce(len(band))
+    if n_band == 0:
         return 0, None                  # no row within reach: nothing stiff to take out, plain options
     krylov = option_value("ksp_type")
     added = insert_options(HYPRE_DEFAULTS) if amg_type() == "hypre" else {}   # read once below, then removed
@@ -376,7 +371,7 @@ def install_band_pc(ksp, band, comm, coarse=None, soften=None):
     pc.setType("python")
     pc.setPythonContext(BandComposite(amg, BandSolve(band, comm), parts, slip, soften, symmetric=krylov == "cg"))
     ksp.setPC(pc)
-    return comm.allreduce(len(band)), parts
+    return n_band, parts
 
 
 def multigrid(pc):

@@ -10,6 +10,13 @@ MESHES = ["petsc.ksp_rtol=1e-10", "output.xdmf=false", "bodies.0.mesh.cells=[4,4
 ITERATIVE = ["petsc.ksp_type=cg", *MESHES]
 
 
+def band_apply(band, x, y):
+    """y = the band's solve of x's band entries, 0 elsewhere (Vecs of the whole system)."""
+    answer = band.solve(x.getArray(readonly=True)[band.rows])
+    y.set(0.0)
+    y.getArray()[band.rows] = answer
+
+
 def solve(comm, tmp, sets, path=CONFIGS / "patch_test.toml", base=ITERATIVE):
     from qsc_petsc.preconditioner import multigrid
     from qsc_petsc.run import Run
@@ -97,7 +104,7 @@ def test_band_is_one_solve_across_ranks(comm, mpi_tmp):
     off = np.setdiff1d(np.arange(r0, r1), dofs) - r0
     x.getArray()[off] = 0.0
     J.mult(x, Jx)
-    band.apply(Jx, y)
+    band_apply(band, Jx, y)
     assert all_close(comm, np.allclose(y.getArray(), x.getArray(), rtol=0, atol=1e-8 * x.norm(PETSc.NormType.INFINITY)))
     run.destroy()
 
@@ -186,7 +193,7 @@ def test_band_composite_is_the_multiplicative_composite(comm, mpi_tmp, krylov):
         Jt = t.duplicate()
         J.mult(t, Jt)
         r.axpy(-1.0, Jt)                      # r -= J Z c
-    composite.band.apply(r, t)
+    band_apply(composite.band, r, t)
     ref.axpy(1.0, t)
     if krylov == "cg":
         J.mult(ref, r)
