@@ -35,10 +35,15 @@ def _destroy_live_runs():
 
 
 def _kept_rows(contact):
-    """The step line's note on finite-sliding pairs whose new search kept the last rows (reuse_tolerance)."""
+    """The step line's note on pairs whose new search kept the last rows (reuse_tolerance): finite sliding's
+    search at the increment's start, large sliding's after the increment's last solve (its rows settled)."""
+    settled = [f"{name.split()[0]} after {e['searches']} searches (gap change {e['gap_change']:.2g})"
+               for name, e in contact.items() if e.get("searches", 0) > 1 and e.get("rows_kept")]
     kept = [f"{name.split()[0]} (gap change {e['gap_change']:.2g}, searched for load factor {e['rows_searched_for']:.4g})"
-            for name, e in contact.items() if e.get("rows_kept") and e.get("gap_change") is not None]
-    return "; kept the last search's rows: " + ", ".join(kept) if kept else ""
+            for name, e in contact.items() if e.get("rows_kept") and e.get("gap_change") is not None
+            and e.get("searches", 0) <= 1]
+    return (("; kept the last search's rows: " + ", ".join(kept) if kept else "")
+            + ("; rows settled: " + ", ".join(settled) if settled else ""))
 
 
 class Phases:
@@ -243,6 +248,8 @@ class Run:
         n_steps = scene.load.steps
         u = system.u.copy()
         update = (lambda u, t: self.contact.terms(u, t)) if self.contact else (lambda u, t: [])
+        large = [pair for pair in scene.contact if pair.sliding == "large"]
+        settle = self.contact.settle if large else None
         before = None         # the converged state before u, (t, Vec), while the predictor extrapolates
         try:
             for step in range(1, n_steps + 1):
@@ -253,7 +260,8 @@ class Run:
                         system, step, t_prev, t, u, update, scene.solver.max_cutbacks,
                         augmented_tol=aug.augmented_tolerance if aug else 1e-6,
                         augmented_max=aug.augmented_max_iterations if aug else 25, log=self.log,
-                        before=before, predict=scene.solver.predictor == "extrapolate")
+                        before=before, predict=scene.solver.predictor == "extrapolate", settle=settle,
+                        max_searches=max((pair.max_searches for pair in large), default=2))
                 with self.phases("output"):
                     point, cell, ul = self.fields(u)
                     record = self._step_record(step, t, stats, u, ul)

@@ -470,19 +470,26 @@ CONTACT = Table({
     "augmented_max_iterations": Int("Most augmented Lagrangian updates per load step.", ge=1, default=25),
     "search_distance": Float("Largest gap that still makes a contact row, in units of the pair's element size.",
                              gt=0, default=1.0, unit="h_eff"),
-    "sliding": Choice(("finite", "small"),
+    "sliding": Choice(("finite", "small", "large"),
                       "\"finite\": a new search in the deformed configuration at every load step, so that the rows "
-                      "follow the sliding; \"small\": one search, in the undeformed configuration, whose rows "
+                      "follow the sliding; \"large\": finite, and after every converged solve of an increment a "
+                      "new search at the converged state, the increment solved again on its rows until a search "
+                      "finds the rows it was solved with (within reuse_tolerance): the answer's rows are its own "
+                      "configuration's, however far the increment slid; \"small\": one search, in the undeformed "
+                      "configuration, whose rows "
                       "are kept for the whole run (the gap linear in the displacement, for sliding well below an "
                       "element size, as in small-strain problems): no search after the first, and a later increment "
                       "whose active set holds starts on its answer (the extrapolating predictor); only points "
                       "within search_distance at the start can ever touch.", default="finite"),
-    "reuse_tolerance": Float("Finite sliding: a new search whose rows are the last term's rows, with gaps at the "
+    "reuse_tolerance": Float("Finite and large sliding: a new search whose rows are the last term's rows, with gaps at the "
                              "increment's start within this fraction of the pair's largest penetration (with the "
                              "augmented Lagrangian: its largest pressure / eps_n) of theirs, "
                              "keeps the last term (its rows linearised about the search they come from, as small "
                              "sliding does), so that an increment over which nothing slid starts on the last "
-                             "answer's linear extrapolation; 0: every search makes new rows.", ge=0, default=1e-3),
+                             "answer's linear extrapolation; 0: every search makes new rows (not with large "
+                             "sliding, whose searches settle by it).", ge=0, default=1e-3),
+    "max_searches": Int("Large sliding: most searches per increment, its start's included; an increment whose rows "
+                        "have not settled by then is cut in half.", ge=2, default=12),
 })
 
 DIE = Table({
@@ -733,6 +740,9 @@ def _cross_check(scene: dict, source_dir: Path) -> None:
         if slave == master:
             raise SceneError(f"contact[{i}].master: self-contact is not supported "
                              f"(slave and master are both on body {_show(slave)})")
+        if pair["sliding"] == "large" and pair["reuse_tolerance"] == 0:
+            raise SceneError(f"contact[{i}].reuse_tolerance: large sliding needs a tolerance > 0 to tell that its "
+                             f"searches have settled, got 0")
     dies: set[str] = set()
     for i, die in enumerate(scene["die"]):
         if die["name"] in dies:

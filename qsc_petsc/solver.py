@@ -702,8 +702,37 @@ def _solve_at(system, step, t, u0):
         raise ConvergenceError(f"load step {step}: {exc}") from None
 
 
+def _merge(stats, more):
+    """Add a further solve's counts to an increment's try and take its outcome."""
+    for key in ("snes_iterations", "ksp_iterations", "jacobian_assemblies"):
+        stats[key] += more[key]
+    stats.update({k: more[k] for k in ("snes_reason", "ksp_reason", "active_rows")})
+
+
+def _solve_enforced(system, step, t, start, augmented_tol, augmented_max):
+    """One solve at load factor t from `start`, then, with augmented Lagrangian terms, multiplier updates and
+    solves until the multipliers settle; returns (ok, u, stats), stats["augmented_iterations"] the updates."""
+    ok, u_new, stats = _solve_at(system, step, t, start)
+    augmented = [term for term in system.terms if term.augmented]
+    outer = 0
+    while ok and augmented:
+        change = max(term.update_multipliers() for term in augmented)
+        outer += 1
+        if change <= augmented_tol:
+            break
+        if outer >= augmented_max:
+            ok = False
+            stats["snes_reason"] = "AUGMENTED_LAGRANGIAN_MAX_IT"
+            break
+        ok, u_new, more = _solve_at(system, step, t, u_new)
+        _merge(stats, more)
+    stats["augmented_iterations"] = outer
+    return ok, u_new, stats
+
+
 def solve_load_step(system, step, t_prev, t_target, u, update_terms, max_cutbacks,
-                    augmented_tol=1e-6, augmented_max=25, log=None, before=None, predict=True):
+                    augmented_tol=1e-6, augmented_max=25, log=None, before=None, predict=True, settle=None,
+                    max_searches=12):
     """Advance from t_prev to t_target, halving the increment on failure; returns (u, stats, before).
 
     predict: each try starts from the linear extrapolation of the last two converged states along the load
@@ -711,6 +740,10 @@ def solve_load_step(system, step, t_prev, t_target, u, update_terms, max_cutback
     try after a failed one, which start from the converged state; False: always from the converged state.
     before: None, or (t_a, u_a), the converged state before (t_prev, u); the returned before is the state
     before the returned u (None unless predict), for the next call.
+    settle (large sliding; ContactModel.settle): after each converged solve, settle(u) searches again at the
+    converged u and returns (terms, settled); while not settled the try is solved again from u on those terms,
+    and a try whose searches (update_terms' included) reach max_searches unsettled fails (SEARCH_NOT_SETTLED),
+    so its increment is halved like any failed one.
     A body that the boundary conditions and every contact row within reach leave free is a scene
     error (System.free_motions); a failed solve names what its iterates left free."""
     dt = t_target - t_prev
@@ -720,33 +753,31 @@ def solve_load_step(system, step, t_prev, t_target, u, update_terms, max_cutback
     while t < t_target - 1e-14:
         t_try = min(t + dt, t_target)
         system.set_terms(update_terms(u, t_try))
-        free = system.free_motions(system.terms, False) if system.free_motions else ""
-        if free:
-            raise SceneError(f"load step {step}: free rigid-body motion of {free}: no displacement or symmetry "
-                             f"boundary holds it and no contact row or die within reach does (frictionless "
-                             f"contact holds the normal direction only); add a boundary condition")
+        _check_held(system, step)
         path = None if failed else before          # a try after a failed one starts from the converged state
         start = extrapolate(path, t, u, t_try)
-        ok, u_new, stats = _solve_at(system, step, t_try, start)
+        ok, u_new, stats = _solve_enforced(system, step, t_try, start, augmented_tol, augmented_max)
         stats["predictor"] = "previous" if path is None else "extrapolated"
         start.destroy()
-        augmented = [term for term in system.terms if term.augmented]
-        outer = 0
-        while ok and augmented:
-            change = max(term.update_multipliers() for term in augmented)
-            outer += 1
-            if change <= augmented_tol:
+        searches = 1
+        while ok and settle is not None:
+            terms, settled = settle(u_new)
+            searches += 1
+            if settled:
                 break
-            if outer >= augmented_max:
+            if searches >= max_searches:
                 ok = False
-                stats["snes_reason"] = "AUGMENTED_LAGRANGIAN_MAX_IT"
+                stats["snes_reason"] = "SEARCH_NOT_SETTLED"
                 break
-            ok, u_new, more = _solve_at(system, step, t_try, u_new)
-            stats["snes_iterations"] += more["snes_iterations"]
-            stats["ksp_iterations"] += more["ksp_iterations"]
-            stats["jacobian_assemblies"] += more["jacobian_assemblies"]
-            stats.update({k: more[k] for k in ("snes_reason", "ksp_reason", "active_rows")})
-        stats.update(load_factor=t_try, augmented_iterations=outer)
+            system.set_terms(terms)
+            _check_held(system, step)
+            ok, u_next, more = _solve_enforced(system, step, t_try, u_new, augmented_tol, augmented_max)
+            u_new.destroy()
+            u_new = u_next
+            updates = stats["augmented_iterations"] + more["augmented_iterations"]
+            _merge(stats, more)
+            stats["augmented_iterations"] = updates
+        stats.update(load_factor=t_try, searches=searches)
         records.append(stats)
         if ok:
             if not predict:
@@ -767,9 +798,21 @@ def solve_load_step(system, step, t_prev, t_target, u, update_terms, max_cutback
             free = stats.get("free_motion", "")
             why = (f"; an iterate left {free} held by no boundary and no closed contact row (a body held only "
                    f"by contact that separates has no equilibrium)") if free else ""
+            if stats["snes_reason"] == "SEARCH_NOT_SETTLED":
+                why = (f"; the rows of the large-sliding pairs had not settled after {max_searches} searches "
+                       f"(contact[i].max_searches; more load steps slide less per increment)")
             raise ConvergenceError(
                 f"load step {step} (load factor {t_try:.6g}) did not converge after {max_cutbacks} "
                 f"cutbacks: SNES {stats['snes_reason']} after {stats['snes_iterations']} iterations, "
                 f"KSP {stats['ksp_reason']}{why}")
         dt *= 0.5
     return u, {"cutbacks": cutbacks, "solves": records}, before
+
+
+def _check_held(system, step):
+    """A scene error when the terms just set leave a body free (System.free_motions)."""
+    free = system.free_motions(system.terms, False) if system.free_motions else ""
+    if free:
+        raise SceneError(f"load step {step}: free rigid-body motion of {free}: no displacement or symmetry "
+                         f"boundary holds it and no contact row or die within reach does (frictionless "
+                         f"contact holds the normal direction only); add a boundary condition")

@@ -214,9 +214,9 @@ class ContactModel:
         self.current = []
         self.faced_at_start = {}   # (pair, side): the opposite material point each node faced at u = 0 (report)
         self.slip_warned = set()
-        # per pair (report): the load factor of the increment whose search made its rows (at that increment's
-        # start), whether they are an earlier search's, and the last search's _gap_change
-        self.searches = {f"contact[{pd['index']}]": {"load_factor": 0.0, "gap_change": None, "kept": False}
+        # per pair (report): the load factor of the search that made its rows, whether the last search kept an
+        # earlier search's, the last search's _gap_change, and the searches of the last increment
+        self.searches = {f"contact[{pd['index']}]": {"load_factor": 0.0, "gap_change": None, "kept": False, "count": 0}
                          for pd in self.pairs}
         self.t = 0.0
 
@@ -241,60 +241,28 @@ class ContactModel:
     def terms(self, u, t):
         """New search at the current displacement u, load factor t: one ConstraintTerm per pair and die. A pair
         with small sliding keeps the term of its first search (its rows and, with the augmented Lagrangian,
-        its multipliers); one with finite sliding keeps its last term when the new search's rows are those rows
-        with gaps within reuse_tolerance of them (_gap_change)."""
+        its multipliers); one with finite or large sliding keeps its last term when the new search's rows are
+        those rows with gaps within reuse_tolerance of them (_gap_change)."""
         small = {f"contact[{pd['index']}]" for pd in self.pairs if pd["spec"].sliding == "small"}
         reusable = {f"contact[{pd['index']}]" for pd in self.pairs
-                    if pd["spec"].sliding == "finite" and pd["spec"].reuse_tolerance > 0}
+                    if pd["spec"].sliding != "small" and pd["spec"].reuse_tolerance > 0}
         kept = {term.name: term for term in self.current if term.name in small}
         last = {term.name: term for term in self.current if term.name in reusable}
         for term in self.current:
             if term.name not in kept and term.name not in last:
                 term.destroy()
         mesh = self.mesh
-        U = self.mesh.local_vectors(u)
-        X = mesh.coords
+        U, X = mesh.local_vectors(u), mesh.coords
         self.t = t
         out = []
         for pd in self.pairs:
-            spec = pd["spec"]
             name = f"contact[{pd['index']}]"
             if name in kept:
                 out.append(kept[name])
-                self.searches[name] = dict(self.searches[name], gap_change=None, kept=True)
+                self.searches[name] = dict(self.searches[name], gap_change=None, kept=True, count=0)
                 continue
-            with self._phase("search"):
-                sp = integration_pass(mesh, spec, pd["slave"], pd["master"], X, U, pd["radius"])
-                mp = None
-                if spec.formulation != "master_slave":
-                    mp = integration_pass(mesh, spec, pd["master"], pd["slave"], X, U, pd["radius"])
-            points = self._check_found(pd, sp, mp)
-            with self._phase("rows"):
-                if spec.formulation == "master_slave":
-                    rows = row_builders.master_slave(sp)
-                elif spec.formulation == "two_pass":
-                    rows = row_builders.two_pass(sp, mp)
-                else:
-                    weight = spec.weight.to_dict() if hasattr(spec.weight, "to_dict") else spec.weight
-                    if spec.master_multiplier == "master_nodes" and spec.integration != "nodal":
-                        with self._phase("search"):
-                            node_pass = project_pass(mesh, pd["master"], pd["slave"], X, U, pd["radius"])[0]
-                        rows = row_builders.quasi_symmetric_master_nodes(sp, mp, node_pass, weight,
-                                                                         move=self._to_row_owners)
-                    else:
-                        rows = row_builders.quasi_symmetric(sp, mp, weight)
-                term = self._term(name, rows, pd["eps_n"], pd["h_eff"], spec.enforcement == "augmented_lagrangian",
-                                  alpha=spec.penalty)
-                term.points = points
-                change, reused = None, False
-                if name in last:
-                    change = _gap_change(last[name], term, u)
-                    reused = change <= spec.reuse_tolerance
-                    (term if reused else last[name]).destroy()
-                    term = last[name] if reused else term
-                searched_for = self.searches[name]["load_factor"] if reused else t
-                self.searches[name] = {"load_factor": searched_for, "gap_change": change, "kept": reused}
-                out.append(term)
+            out.append(self._search(pd, U, u, t, last.get(name)))
+            self.searches[name]["count"] = 1
         for dd in self.dies:
             spec = dd["spec"]
             with self._phase("rows"):
@@ -308,6 +276,62 @@ class ContactModel:
                 out.append(self._term(f"die[{dd['index']}]", rows, dd["eps_n"], dd["h"], False, node_local=True))
         self.current = out
         return out
+
+    def _search(self, pd, U, u, t, last):
+        """Pair pd's term from a new search at local displacements U (u: the same as a Vec), load factor t:
+        `last` (the pair's last term, or None) instead when the new rows are its rows with gaps within
+        reuse_tolerance of theirs at u; the term not returned is destroyed."""
+        mesh, spec, X = self.mesh, pd["spec"], self.mesh.coords
+        name = f"contact[{pd['index']}]"
+        with self._phase("search"):
+            sp = integration_pass(mesh, spec, pd["slave"], pd["master"], X, U, pd["radius"])
+            mp = None
+            if spec.formulation != "master_slave":
+                mp = integration_pass(mesh, spec, pd["master"], pd["slave"], X, U, pd["radius"])
+        points = self._check_found(pd, sp, mp)
+        with self._phase("rows"):
+            if spec.formulation == "master_slave":
+                rows = row_builders.master_slave(sp)
+            elif spec.formulation == "two_pass":
+                rows = row_builders.two_pass(sp, mp)
+            else:
+                weight = spec.weight.to_dict() if hasattr(spec.weight, "to_dict") else spec.weight
+                if spec.master_multiplier == "master_nodes" and spec.integration != "nodal":
+                    with self._phase("search"):
+                        node_pass = project_pass(mesh, pd["master"], pd["slave"], X, U, pd["radius"])[0]
+                    rows = row_builders.quasi_symmetric_master_nodes(sp, mp, node_pass, weight,
+                                                                     move=self._to_row_owners)
+                else:
+                    rows = row_builders.quasi_symmetric(sp, mp, weight)
+            term = self._term(name, rows, pd["eps_n"], pd["h_eff"], spec.enforcement == "augmented_lagrangian",
+                              alpha=spec.penalty)
+            term.points = points
+            change, reused = None, False
+            if last is not None:
+                change = _gap_change(last, term, u)
+                reused = change <= spec.reuse_tolerance
+                (term if reused else last).destroy()
+                term = last if reused else term
+            searched_for = self.searches[name]["load_factor"] if reused else t
+            self.searches[name] = dict(self.searches[name], load_factor=searched_for, gap_change=change, kept=reused)
+        return term
+
+    def settle(self, u):
+        """Large sliding, after a converged solve at the current load factor: each large-sliding pair searched
+        again at the converged u (_search against the term it was solved with). Returns (terms, settled): the
+        current terms with those pairs' kept or new, and whether every one kept its term (then the answer's
+        rows are its own configuration's and nothing changed); (None, True) without such pairs (collective)."""
+        large = [(i, pd) for i, pd in enumerate(self.pairs) if pd["spec"].sliding == "large"]
+        if not large:
+            return None, True
+        U = self.mesh.local_vectors(u)
+        settled = True
+        for i, pd in large:               # the pairs' terms lead self.current, in the pairs' order
+            name = f"contact[{pd['index']}]"
+            self.current[i] = self._search(pd, U, u, self.t, self.current[i])
+            self.searches[name]["count"] += 1
+            settled = settled and self.searches[name]["kept"]
+        return list(self.current), settled
 
     def _to_row_owners(self, parts):
         """Row triplets (G_rows, G_cols, G_vals, g_rows, g_vals, W_rows, W_vals) moved to their rows' owners."""
@@ -356,7 +380,7 @@ class ContactModel:
                      "eps_n": pd["eps_n"], "h_eff": pd["h_eff"], "integration": pd["spec"].integration,
                      "quadrature_points": term.points, "G_nonzeros": int(term.G.getInfo()["nz_used"]),
                      "rows_searched_for": self.searches[term.name]["load_factor"],
-                     "rows_kept": self.searches[term.name]["kept"],
+                     "rows_kept": self.searches[term.name]["kept"], "searches": self.searches[term.name]["count"],
                      "gap_change": _finite_or_none(self.searches[term.name]["gap_change"])}
             W = term.W.getArray()[term.rows]
             entry["contact_area"] = self.comm.allreduce(float(term.phi * W[term.active].sum()), op=MPI.SUM)
@@ -466,6 +490,10 @@ def _searched(spec):
     """How a pair is searched, for `qsc check`."""
     if spec.sliding == "small":
         return "searched once"
+    if spec.sliding == "large":
+        return (f"searched at every load step and again after every converged solve until a search finds the "
+                f"rows within {spec.reuse_tolerance:g} of the largest penetration, at most {spec.max_searches} "
+                f"searches an increment")
     if spec.reuse_tolerance > 0:
         return (f"searched at every load step; rows kept while a search finds them within {spec.reuse_tolerance:g} "
                 f"of the largest penetration")
