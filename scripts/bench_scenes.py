@@ -10,7 +10,7 @@ import argparse
 
 from benchlib import ROOT, add_docs_args, run, write_table
 
-SCENES = ["patch_test", "cubes_upsetting", "two_cubes_quarter", "two_cubes_dies", "flat_punch", "stiff_plate",
+SCENES = ["patch_test", "cubes_upsetting", "two_cubes_quarter", "two_cubes_dies", "sliding_cubes", "flat_punch", "stiff_plate",
           "hertz_medium"]
 VARIANTS = {
     "defaults": [],
