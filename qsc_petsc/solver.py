@@ -723,6 +723,7 @@ def _solve_enforced(system, step, t, start, augmented_tol, augmented_max):
         if outer >= augmented_max:
             ok = False
             stats["snes_reason"] = "AUGMENTED_LAGRANGIAN_MAX_IT"
+            stats["multiplier_change"] = change
             break
         ok, u_new, more = _solve_at(system, step, t, u_new)
         _merge(stats, more)
@@ -798,6 +799,11 @@ def solve_load_step(system, step, t_prev, t_target, u, update_terms, max_cutback
             free = stats.get("free_motion", "")
             why = (f"; an iterate left {free} held by no boundary and no closed contact row (a body held only "
                    f"by contact that separates has no equilibrium)") if free else ""
+            if stats["snes_reason"] == "AUGMENTED_LAGRANGIAN_MAX_IT":
+                why = (f"; the multipliers still changed by {stats['multiplier_change']:.2g} (relative; "
+                       f"contact[i].augmented_tolerance {augmented_tol:g}) after {augmented_max} updates: raise "
+                       f"contact[i].augmented_max_iterations, or the penalty (the updates converge the faster the "
+                       f"stiffer it is)")
             if stats["snes_reason"] == "SEARCH_NOT_SETTLED":
                 why = (f"; the rows of the large-sliding pairs had not settled after {max_searches} searches "
                        f"(contact[i].max_searches; more load steps slide less per increment)")

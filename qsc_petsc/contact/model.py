@@ -310,6 +310,9 @@ class ContactModel:
             if last is not None:
                 change = _gap_change(last, term, u)
                 reused = change <= spec.reuse_tolerance
+                if not reused and term.lmbda is not None and last.lmbda is not None and self.comm.allreduce(
+                        np.array_equal(last.rows, term.rows), op=MPI.LAND):
+                    term.lmbda = last.lmbda.copy()     # the same rows: the Uzawa loop starts on their multipliers
                 (term if reused else last).destroy()
                 term = last if reused else term
             searched_for = self.searches[name]["load_factor"] if reused else t
