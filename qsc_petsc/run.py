@@ -250,16 +250,16 @@ class Run:
         update = (lambda u, t: self.contact.terms(u, t)) if self.contact else (lambda u, t: [])
         large = [pair for pair in scene.contact if pair.sliding == "large"]
         settle = self.contact.settle if large else None
+        augmented_max = max((pair.augmented_max_iterations for pair in scene.contact
+                             if pair.enforcement == "augmented_lagrangian"), default=25)
         before = None         # the converged state before u, (t, Vec), while the predictor extrapolates
         try:
             for step in range(1, n_steps + 1):
                 t_prev, t = (step - 1) / n_steps, step / n_steps
                 with self.phases("solve"):
-                    aug = scene.contact[0] if scene.contact else None
                     u, stats, before = solve_load_step(
                         system, step, t_prev, t, u, update, scene.solver.max_cutbacks,
-                        augmented_tol=aug.augmented_tolerance if aug else 1e-6,
-                        augmented_max=aug.augmented_max_iterations if aug else 25, log=self.log,
+                        augmented_max=augmented_max, log=self.log,
                         before=before, predict=scene.solver.predictor == "extrapolate", settle=settle,
                         max_searches=max((pair.max_searches for pair in large), default=2))
                 with self.phases("output"):

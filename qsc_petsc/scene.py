@@ -467,7 +467,8 @@ CONTACT = Table({
     "enforcement": Choice(("penalty", "augmented_lagrangian"), "How the constraint is enforced.", default="penalty"),
     "augmented_tolerance": Float("Relative change of the multipliers that ends the augmented Lagrangian loop.",
                                  gt=0, default=1e-6),
-    "augmented_max_iterations": Int("Most augmented Lagrangian updates per load step.", ge=1, default=25),
+    "augmented_max_iterations": Int("Most augmented Lagrangian updates per load step (one loop updates every "
+                                    "augmented pair: the largest of their values holds).", ge=1, default=25),
     "search_distance": Float("Largest gap that still makes a contact row, in units of the pair's element size.",
                              gt=0, default=1.0, unit="h_eff"),
     "sliding": Choice(("finite", "small", "large"),

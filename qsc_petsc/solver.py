@@ -74,6 +74,7 @@ class ConstraintTerm:
         self.closed_tol = closed_tol
         self.gate_of = gate_of                            # per existing row: position of its gate row, or -1
         self.augmented = augmented
+        self.augmented_tolerance = 1e-6         # the Uzawa loop's end: its pair's augmented_tolerance
         self.lmbda = np.zeros(len(self.rows)) if augmented else None
         self.c = G.createVecLeft()
         self.m = G.createVecLeft()
@@ -134,15 +135,17 @@ class ConstraintTerm:
             if mat is not None:
                 mat.destroy()
 
-    def update_multipliers(self):
-        """Uzawa step of the augmented Lagrangian; returns the relative change of the multipliers."""
+    def next_multipliers(self):
+        """The augmented Lagrangian's Uzawa step from the last evaluate, not applied: (new multipliers, their
+        relative change) (collective). Left unapplied once every term has settled, the answer keeps the
+        multipliers it was solved with, so that its contact forces balance the bodies' (an applied update
+        would add its change to the forces reported at the same displacement)."""
         c = self.c.getArray()[self.rows]
         new = multipliers_update(self.lmbda, c, self.W.getArray()[self.rows], self.eps_n, self.gate_of)
         comm = self.G.getComm().tompi4py()
         change = comm.allreduce(float(np.sum((new - self.lmbda) ** 2)), op=MPI.SUM)
         size = comm.allreduce(float(np.sum(new ** 2)), op=MPI.SUM)
-        self.lmbda = new
-        return np.sqrt(change / size) if size > 0 else 0.0
+        return new, (np.sqrt(change / size) if size > 0 else 0.0)
 
 
 class System:
@@ -709,22 +712,26 @@ def _merge(stats, more):
     stats.update({k: more[k] for k in ("snes_reason", "ksp_reason", "active_rows")})
 
 
-def _solve_enforced(system, step, t, start, augmented_tol, augmented_max):
+def _solve_enforced(system, step, t, start, augmented_max):
     """One solve at load factor t from `start`, then, with augmented Lagrangian terms, multiplier updates and
-    solves until the multipliers settle; returns (ok, u, stats), stats["augmented_iterations"] the updates."""
+    solves until the next update would change every term's multipliers by at most its augmented_tolerance; returns (ok, u, stats),
+    stats["augmented_iterations"] the updates."""
     ok, u_new, stats = _solve_at(system, step, t, start)
     augmented = [term for term in system.terms if term.augmented]
     outer = 0
     while ok and augmented:
-        change = max(term.update_multipliers() for term in augmented)
+        steps = [(term, *term.next_multipliers()) for term in augmented]
         outer += 1
-        if change <= augmented_tol:
+        if all(change <= term.augmented_tolerance for term, _, change in steps):
             break
         if outer >= augmented_max:
             ok = False
             stats["snes_reason"] = "AUGMENTED_LAGRANGIAN_MAX_IT"
-            stats["multiplier_change"] = change
+            term, _, change = max(steps, key=lambda step: step[2] / step[0].augmented_tolerance)
+            stats["multipliers_unsettled"] = (term.name, change, term.augmented_tolerance)
             break
+        for term, new, _ in steps:
+            term.lmbda = new
         ok, u_new, more = _solve_at(system, step, t, u_new)
         _merge(stats, more)
     stats["augmented_iterations"] = outer
@@ -732,7 +739,7 @@ def _solve_enforced(system, step, t, start, augmented_tol, augmented_max):
 
 
 def solve_load_step(system, step, t_prev, t_target, u, update_terms, max_cutbacks,
-                    augmented_tol=1e-6, augmented_max=25, log=None, before=None, predict=True, settle=None,
+                    augmented_max=25, log=None, before=None, predict=True, settle=None,
                     max_searches=12):
     """Advance from t_prev to t_target, halving the increment on failure; returns (u, stats, before).
 
@@ -757,7 +764,7 @@ def solve_load_step(system, step, t_prev, t_target, u, update_terms, max_cutback
         _check_held(system, step)
         path = None if failed else before          # a try after a failed one starts from the converged state
         start = extrapolate(path, t, u, t_try)
-        ok, u_new, stats = _solve_enforced(system, step, t_try, start, augmented_tol, augmented_max)
+        ok, u_new, stats = _solve_enforced(system, step, t_try, start, augmented_max)
         stats["predictor"] = "previous" if path is None else "extrapolated"
         start.destroy()
         searches = 1
@@ -772,7 +779,7 @@ def solve_load_step(system, step, t_prev, t_target, u, update_terms, max_cutback
                 break
             system.set_terms(terms)
             _check_held(system, step)
-            ok, u_next, more = _solve_enforced(system, step, t_try, u_new, augmented_tol, augmented_max)
+            ok, u_next, more = _solve_enforced(system, step, t_try, u_new, augmented_max)
             u_new.destroy()
             u_new = u_next
             updates = stats["augmented_iterations"] + more["augmented_iterations"]
@@ -800,9 +807,10 @@ def solve_load_step(system, step, t_prev, t_target, u, update_terms, max_cutback
             why = (f"; an iterate left {free} held by no boundary and no closed contact row (a body held only "
                    f"by contact that separates has no equilibrium)") if free else ""
             if stats["snes_reason"] == "AUGMENTED_LAGRANGIAN_MAX_IT":
-                why = (f"; the multipliers still changed by {stats['multiplier_change']:.2g} (relative; "
-                       f"contact[i].augmented_tolerance {augmented_tol:g}) after {augmented_max} updates: raise "
-                       f"contact[i].augmented_max_iterations, or the penalty (the updates converge the faster the "
+                name, change, tol = stats["multipliers_unsettled"]
+                why = (f"; the multipliers of {name} still changed by {change:.2g} (relative; its "
+                       f"augmented_tolerance {tol:g}) after {augmented_max} updates: raise "
+                       f"{name}.augmented_max_iterations, or its penalty (the updates converge the faster the "
                        f"stiffer it is)")
             if stats["snes_reason"] == "SEARCH_NOT_SETTLED":
                 why = (f"; the rows of the large-sliding pairs had not settled after {max_searches} searches "

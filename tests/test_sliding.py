@@ -268,8 +268,9 @@ def test_augmented_lagrangian_that_does_not_settle_names_its_keys(tmp_path):
     it converges (34 in the last increment), and the updates converge the faster the stiffer the penalty
     (alpha 1e3: 8, measured)."""
     al = SMALL + ['contact.0.enforcement="augmented_lagrangian"', "contact.0.penalty=1e2", "die.1.motion=[0.3,0,-0.02]"]
-    with pytest.raises(ConvergenceError, match=r"AUGMENTED_LAGRANGIAN_MAX_IT.*the multipliers still changed by .*"
-                                               r"after 25 updates: raise contact\[i\]\.augmented_max_iterations"):
+    with pytest.raises(ConvergenceError, match=r"AUGMENTED_LAGRANGIAN_MAX_IT.*the multipliers of contact\[0\] still "
+                                               r"changed by .* after 25 updates: raise "
+                                               r"contact\[0\]\.augmented_max_iterations"):
         run_scene(CONFIGS / "two_cubes_dies.toml", tmp_path / "few", al)
     _, summary = run_scene(CONFIGS / "two_cubes_dies.toml", tmp_path / "more",
                            al + ["contact.0.augmented_max_iterations=100"])

@@ -306,6 +306,7 @@ class ContactModel:
             term = self._term(name, rows, pd["eps_n"], pd["h_eff"], spec.enforcement == "augmented_lagrangian",
                               alpha=spec.penalty)
             term.points = points
+            term.augmented_tolerance = spec.augmented_tolerance
             change, reused = None, False
             if last is not None:
                 change = _gap_change(last, term, u)
