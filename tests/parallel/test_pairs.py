@@ -5,20 +5,22 @@ Runs serially in the suite and under mpirun -n 2 and -n 3."""
 import pytest
 from conftest import run_scene
 
-SCENE = """
-name = "three_cubes"
+BODY = """
 [[bodies]]
-name = "a"
-mesh = {{ type = "box", origin = [0.0, 0.0, 0.0], size = [1.0, 1.0, 1.0], cells = [3, 3, 3] }}
+name = "{name}"
+mesh = {{ type = "box", origin = [0.0, 0.0, {z0}], size = [1.0, 1.0, 1.0], cells = [{n}, {n}, {n}] }}
 material = {{ youngs_modulus = 1000.0, poissons_ratio = 0.3 }}
-[[bodies]]
-name = "b"
-mesh = {{ type = "box", origin = [0.0, 0.0, 1.0], size = [1.0, 1.0, 1.0], cells = [4, 4, 4] }}
-material = {{ youngs_modulus = 1000.0, poissons_ratio = 0.3 }}
-[[bodies]]
-name = "c"
-mesh = {{ type = "box", origin = [0.0, 0.0, 2.0], size = [1.0, 1.0, 1.0], cells = [3, 3, 3] }}
-material = {{ youngs_modulus = 1000.0, poissons_ratio = 0.3 }}
+"""
+DIE = """
+[[die]]
+name = "{name}"
+point = [0.0, 0.0, {z}]
+normal = [0.0, 0.0, {nz}]
+motion = [0.0, 0.0, {dz}]
+surfaces = ["{surface}"]
+condition = "sticking"
+"""
+PAIRS_AND_SOLVER = """
 [[boundary]]
 surface = "b.xmin"
 type = "symmetry"
@@ -35,19 +37,6 @@ master = "c.zmin"
 enforcement = "augmented_lagrangian"
 penalty = 1e2
 augmented_tolerance = {tolerance}
-[[die]]
-name = "bottom"
-point = [0.0, 0.0, 0.0]
-normal = [0.0, 0.0, 1.0]
-surfaces = ["a.zmin"]
-condition = "sticking"
-[[die]]
-name = "top"
-point = [0.0, 0.0, 3.0]
-normal = [0.0, 0.0, -1.0]
-motion = [0.0, 0.0, -0.03]
-surfaces = ["c.zmax"]
-condition = "sticking"
 [petsc]
 ksp_type = "preonly"
 pc_type = "lu"
@@ -55,10 +44,19 @@ pc_factor_mat_solver_type = "mumps"
 """
 
 
+def scene_text(tolerance):
+    """Three unit cubes a, b, c (3, 4, 3 cells a side) stacked along z between a fixed and a descending die."""
+    return ('name = "three_cubes"\n' + "".join(BODY.format(name=name, z0=z0, n=n)
+                                               for name, z0, n in (("a", 0.0, 3), ("b", 1.0, 4), ("c", 2.0, 3)))
+            + DIE.format(name="bottom", z=0.0, nz=1.0, dz=0.0, surface="a.zmin")
+            + DIE.format(name="top", z=3.0, nz=-1.0, dz=-0.03, surface="c.zmax")
+            + PAIRS_AND_SOLVER.format(tolerance=tolerance))
+
+
 def _run(comm, folder, tolerance):
     path = folder / f"scene_{tolerance:g}.toml"
     if comm.rank == 0:
-        path.write_text(SCENE.format(tolerance=tolerance))
+        path.write_text(scene_text(tolerance))
     comm.barrier()
     run, summary = run_scene(path, folder / f"out_{tolerance:g}", comm=comm)
     run.destroy()
