@@ -714,8 +714,9 @@ def _merge(stats, more):
 
 def _solve_enforced(system, step, t, start, augmented_max):
     """One solve at load factor t from `start`, then, with augmented Lagrangian terms, multiplier updates and
-    solves until the next update would change every term's multipliers by at most its augmented_tolerance; returns (ok, u, stats),
-    stats["augmented_iterations"] the updates."""
+    solves until the next update would change every term's multipliers by at most its augmented_tolerance
+    (that update is left unapplied: ConstraintTerm.next_multipliers); returns (ok, u, stats),
+    stats["augmented_iterations"] the updates computed."""
     ok, u_new, stats = _solve_at(system, step, t, start)
     augmented = [term for term in system.terms if term.augmented]
     outer = 0
