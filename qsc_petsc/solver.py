@@ -741,7 +741,7 @@ def _solve_enforced(system, step, t, start, augmented_max):
 
 def solve_load_step(system, step, t_prev, t_target, u, update_terms, max_cutbacks,
                     augmented_max=25, log=None, before=None, predict=True, settle=None,
-                    max_searches=12):
+                    max_searches=20):
     """Advance from t_prev to t_target, halving the increment on failure; returns (u, stats, before).
 
     predict: each try starts from the linear extrapolation of the last two converged states along the load

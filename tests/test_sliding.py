@@ -249,7 +249,7 @@ def test_large_sliding_is_validated_and_unsettled_increments_are_cut(tmp_path):
     scene = load_scene(CONFIGS / "two_cubes_dies.toml", SMALL + ['contact.0.sliding="large"'])
     line = contact_model.contact_plan(distribute_mesh(scene, MPI.COMM_WORLD), scene)[0]
     assert "large sliding (searched at every load step and again after every converged solve" in line
-    assert "at most 12 searches an increment" in line
+    assert "at most 20 searches an increment" in line
     lines = []
     with pytest.raises(ConvergenceError, match=r"SEARCH_NOT_SETTLED.*contact\[i\]\.max_searches"):
         run_scene(CONFIGS / "two_cubes_dies.toml", tmp_path / "cut",
