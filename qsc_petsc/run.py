@@ -277,6 +277,10 @@ class Run:
                 self.log(f"step {step}/{n_steps}: load factor {t:.4g}, {last['snes_iterations']} Newton / "
                          f"{sum(s['ksp_iterations'] for s in stats['solves'])} Krylov iterations, "
                          f"{last['snes_reason']}{_kept_rows(record.get('contact', {}))}")
+                if last.get("tied_in_tension"):
+                    self.log(f"step {step}: note: {last['tied_in_tension']} sticking die node(s) held in slight "
+                             f"tension: their pressure is about zero, and letting them go made the Newton "
+                             f"iterations cycle (summary: tied_rows, tied_in_tension)")
         except QscError as exc:
             self.summary["status"] = "failed"
             self.summary["error"] = str(exc)

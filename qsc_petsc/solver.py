@@ -88,6 +88,9 @@ class ConstraintTerm:
         # existing row, or None): rows the last converged increment ended closed, which START_TOUCHING closes too
         self.start = None
         self.held_closed = None
+        # per existing row, or None: gate rows (a sticking die's normal rows) that this solve keeps closed, with
+        # force of either sign, since its active sets cycled (System._tie_gates)
+        self.tied = None
 
     def row_values(self, u):
         """c = G u - g at u, kept in self.c; returns its existing rows (collective)."""
@@ -103,9 +106,12 @@ class ConstraintTerm:
             tol = np.full(len(c), np.inf)
         elif self.start == START_TOUCHING and self.held_closed is not None:
             tol = np.where(self.held_closed, np.inf, tol)
+        bilateral = self.start is not None
+        if self.tied is not None:
+            tol = np.where(self.tied, np.inf, tol)
+            bilateral = bilateral | self.tied
         self.energy, m, self.d, self.active = row_response(
-            c, self.W.getArray()[self.rows], self.eps_n, self.phi, tol, self.lmbda, self.gate_of,
-            self.start is not None)
+            c, self.W.getArray()[self.rows], self.eps_n, self.phi, tol, self.lmbda, self.gate_of, bilateral)
         marr = self.m.getArray()
         marr[:] = 0.0
         marr[self.rows] = m
@@ -190,6 +196,7 @@ class System:
         self.sets_seen = {}
         self.damped_from = None
         self.damped_steps = 0
+        self.tied_rows = 0
         # the residual norm of the previous iteration, and the relative residual at which a solve stopped on the
         # round-off floor (None: it met the target)
         self.last_fnorm = None
@@ -455,6 +462,8 @@ class System:
         self.prev_active = active.copy()
         rtol, atol, stol, max_it = snes.getTolerances()
         self._watch_cycles(it, active)
+        if self.damped_from is not None:
+            self._tie_gates()
         last_fnorm, self.last_fnorm = self.last_fnorm, fnorm
         if it == 0:
             self.floor = None
@@ -510,6 +519,32 @@ class System:
             self.damped_from = it
         self.sets_seen[signature] = it
 
+    def _tie_gates(self):
+        """Once the active sets cycle (_watch_cycles), every closed gate row (a sticking die's normal row) stays
+        closed, with force of either sign, for the rest of the solve (collective). A sticking node's tangential
+        rows act only while its normal row is closed, so its force jumps when that row opens: a node whose
+        pressure would be about zero either way has no answer, and no damping finds one (a cube dragged 0.5 m
+        sideways by a sticking die, large sliding: full steps from the 3rd Newton iteration alternated between
+        residuals 1.6e-2 and 1.06, one die node stuck and let go, until the 50th). Tied, it keeps the small
+        tension it needs; the summary counts these rows (tied_rows). Rows closed now only: F and J at the
+        current iterate do not change."""
+        tied = 0
+        for term in self.terms:
+            if term.gate_of is None:
+                continue
+            gates = np.zeros(len(term.rows), dtype=bool)
+            gates[term.gate_of[term.gate_of >= 0]] = True
+            closed = gates & term.active
+            term.tied = closed if term.tied is None else term.tied | closed
+            tied += int(term.tied.sum())
+        self.tied_rows = self.comm.allreduce(tied, op=MPI.SUM)
+
+    def _tied_in_tension(self):
+        """How many tied gate rows carry a tensile force at the last evaluate (collective)."""
+        count = sum(int(np.sum(term.tied & (term.m.getArray()[term.rows] < 0.0)))
+                    for term in self.terms if term.tied is not None)
+        return self.comm.allreduce(count, op=MPI.SUM)
+
     def _damp(self, x, y):
         """Line-search pre-check (the step is x - y): once cycling was seen (_watch_cycles), halve y until the
         residual norm falls below (1 - 1e-4 lambda) of the current one, at most DAMPING_HALVINGS times
@@ -543,6 +578,9 @@ class System:
         self.free_now = self.free_seen = ""
         rebuilds = self.jacobian_rebuilds
         self.damped_steps = 0
+        self.tied_rows = 0
+        for term in self.terms:
+            term.tied = None
         start = None
         while True:
             u = u0.copy()
@@ -583,6 +621,8 @@ class System:
             "closed_start": start,          # the rows the increment started closed (None without rows)
             "damped_from": self.damped_from,   # the Newton iteration where active-set cycling was met, or None
             "damped_steps": self.damped_steps,
+            "tied_rows": self.tied_rows,       # sticking die rows kept closed after cycling (_tie_gates)
+            "tied_in_tension": self._tied_in_tension(),   # of those, the ones the answer pulls on
             "round_off_floor": self.floor,     # the relative residual it stopped at on the floor, or None
             "jacobian_assemblies": self.jacobian_rebuilds - rebuilds,   # with rows: one per new active set
         }
@@ -707,9 +747,12 @@ def _solve_at(system, step, t, u0):
 
 def _merge(stats, more):
     """Add a further solve's counts to an increment's try and take its outcome."""
-    for key in ("snes_iterations", "ksp_iterations", "jacobian_assemblies"):
+    for key in ("snes_iterations", "ksp_iterations", "jacobian_assemblies", "damped_steps"):
         stats[key] += more[key]
-    stats.update({k: more[k] for k in ("snes_reason", "ksp_reason", "active_rows")})
+    stats["tied_rows"] = max(stats["tied_rows"], more["tied_rows"])
+    if stats["damped_from"] is None:        # the Newton iteration of the first solve that met cycling
+        stats["damped_from"] = more["damped_from"]
+    stats.update({k: more[k] for k in ("snes_reason", "ksp_reason", "active_rows", "tied_in_tension")})
 
 
 def _solve_enforced(system, step, t, start, augmented_max):
