@@ -145,6 +145,20 @@ def test_large_sliding_rank_invariance(comm, mpi_tmp):
     assert searches[0] == searches[1] and min(searches[0]) > 2
 
 
+def test_sticking_tie_rank_invariance(comm, mpi_tmp):
+    """A sticking die node at about zero pressure whose Newton iterations cycle (configs/sliding_cubes.toml dragged
+    0.6 m in one increment, 4 / 6 cells a side): every rank count detects the cycle at the same iteration, ties
+    the same rows and holds the same one node in tension, with the serial summary to 1e-8."""
+    from qsc_petsc.scene import load_scene
+    scene = load_scene(CONFIGS / "sliding_cubes.toml", ["bodies.0.mesh.cells=[4,4,4]", "bodies.1.mesh.cells=[6,6,6]",
+                                                         "die.1.motion=[0.6,0.05,-0.03]", "load.steps=1"])
+    out, summaries = _on_all_and_one_rank(comm, mpi_tmp, scene)
+    assert all_close(comm, np.allclose(out[0], out[1], rtol=1e-8, atol=1e-14))
+    ties = [[(x["damped_from"], x["tied_rows"], x["tied_in_tension"]) for x in s["steps"][-1]["solves"]]
+            for s in summaries]
+    assert ties[0] == ties[1] and ties[0][-1][2] == 1
+
+
 @pytest.mark.parametrize("change, message", [
     ("contact.0.master=lower.top", 'contact[0].master: box body "lower" has no surface "top"'),
     ("contact.0.slave=lower.zmax", "contact[0]"),
