@@ -490,8 +490,8 @@ CONTACT = Table({
                              "answer's linear extrapolation; 0: every search makes new rows (not with large "
                              "sliding, whose searches settle by it).", ge=0, default=1e-3),
     "max_searches": Int("Large sliding: most searches per increment, its start's included; an increment whose rows "
-                        "have not settled by then is cut in half (the gap change falls by 0.1-0.35 a search once "
-                        "the rows stop changing; the slides measured in session 17 settled in 6-13).", ge=2,
+                        "have not settled by then is cut in half (the slides measured in session 17 settled in "
+                        "6-10 searches with segment rows, 11-13 with nodal or Gauss rows).", ge=2,
                         default=20),
 })
 
