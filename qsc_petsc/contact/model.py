@@ -330,7 +330,8 @@ class ContactModel:
 
     def settle(self, u):
         """Large sliding, after a converged solve at the current load factor: each large-sliding pair searched
-        again at the converged u (_search against the term it was solved with). Returns (terms, settled): the
+        again, at the converged u or part-way to it (_relaxation), against the term it was solved with
+        (_search). Returns (terms, settled): the
         current terms with those pairs' kept or new, and whether every one kept its term (then the answer's
         rows are its own configuration's and nothing changed); (None, True) without such pairs (collective)."""
         large = [(i, pd) for i, pd in enumerate(self.pairs) if pd["spec"].sliding == "large"]
@@ -362,9 +363,8 @@ class ContactModel:
         w = 1.0
         if state["r"] is not None:
             dr = r - state["r"]
-            den = self.comm.allreduce(float(dr @ dr), op=MPI.SUM)
+            num, den = self.comm.allreduce(np.array([state["r"] @ dr, dr @ dr]), op=MPI.SUM)
             if den > 0.0:
-                num = self.comm.allreduce(float(state["r"] @ dr), op=MPI.SUM)
                 w = float(np.clip(-state["w"] * num / den, MIN_RELAXATION, MAX_RELAXATION))
         state["r"], state["w"] = r, w
         return w
