@@ -753,6 +753,8 @@ def _merge(stats, more):
     if stats["damped_from"] is None:        # the Newton iteration of the first solve that met cycling
         stats["damped_from"] = more["damped_from"]
     stats.update({k: more[k] for k in ("snes_reason", "ksp_reason", "active_rows", "tied_in_tension")})
+    if "multipliers_unsettled" in more:     # the outcome's: why a later solve of the try failed
+        stats["multipliers_unsettled"] = more["multipliers_unsettled"]
 
 
 def _solve_enforced(system, step, t, start, augmented_max):

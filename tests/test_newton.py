@@ -282,3 +282,21 @@ def test_run_left_alive_in_process_exits_cleanly(tmp_path):
                           check=False)
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert "SEGV" not in proc.stderr
+
+
+def test_a_try_reports_the_failure_of_its_last_solve():
+    """An increment's try merges the counts of its solves (augmented Lagrangian updates, large sliding's
+    searches) and takes the outcome of the last: an augmented Lagrangian loop that failed in a later solve
+    reports which pair's multipliers were still moving (a large-sliding slide with an augmented pair at alpha
+    1e2 stopped with a KeyError instead of that message before session 17)."""
+    from qsc_petsc.solver import _merge
+    first = {"snes_iterations": 3, "ksp_iterations": 3, "jacobian_assemblies": 2, "damped_steps": 0,
+             "tied_rows": 0, "damped_from": None, "snes_reason": "CONVERGED_FNORM_RELATIVE",
+             "ksp_reason": "CONVERGED_ITS", "active_rows": 10, "tied_in_tension": 0}
+    later = dict(first, snes_iterations=5, damped_from=4, tied_rows=2, snes_reason="AUGMENTED_LAGRANGIAN_MAX_IT",
+                 multipliers_unsettled=("contact[1]", 1.6e-5, 1e-6))
+    _merge(first, later)
+    assert first["snes_iterations"] == 8 and first["ksp_iterations"] == 6 and first["jacobian_assemblies"] == 4
+    assert (first["damped_from"], first["tied_rows"]) == (4, 2)
+    assert first["snes_reason"] == "AUGMENTED_LAGRANGIAN_MAX_IT"
+    assert first["multipliers_unsettled"] == ("contact[1]", 1.6e-5, 1e-6)
