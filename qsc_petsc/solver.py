@@ -30,6 +30,9 @@ MUMPS_MAX_RELAXATION = 1000    # percent
 KSP_MAX_IT = 2000              # Krylov iterations per linear solve unless -qsc_ksp_max_it says otherwise
 START_TOUCHING, START_REACH = "touching", "reach"   # ConstraintTerm.start: an increment's first closed set
 DAMPING_HALVINGS = 8           # smallest damped Newton step 1/2^7 (System._damp)
+# Newton iterations without a new lowest residual after which steps are damped (System._watch_cycles): 8 damped
+# hertz_fine's two_pass (peeling its over-closed edge ring by ring) into 27 + 16 iterations against 20 + 15
+STALL_WINDOW = 15
 # System.softened: the multigrid's contact rows are at most this much softer than the pair's own. Softer, its
 # corrections at the interface outgrew what the band's solve puts right: two cubes (70k dofs), alpha 1e6 with
 # contact_multigrid_alpha 1 (1e-6) stopped at 2000 Krylov iterations; at 1e-4 (alpha_mg 100) 55-56 against 61.
@@ -195,6 +198,8 @@ class System:
         # iteration}, and the iteration from which Newton steps are damped (None: full steps)
         self.sets_seen = {}
         self.damped_from = None
+        self.cycled = False         # an active set came back (_watch_cycles): sticking-die rows are tied
+        self.fnorms = []
         self.damped_steps = 0
         self.tied_rows = 0
         # the residual norm of the previous iteration, and the relative residual at which a solve stopped on the
@@ -461,8 +466,8 @@ class System:
         first = self.prev_active is None
         self.prev_active = active.copy()
         rtol, atol, stol, max_it = snes.getTolerances()
-        self._watch_cycles(it, active)
-        if self.damped_from is not None:
+        self._watch_cycles(it, active, fnorm)
+        if self.cycled:
             self._tie_gates()
         last_fnorm, self.last_fnorm = self.last_fnorm, fnorm
         if it == 0:
@@ -505,17 +510,24 @@ class System:
                 and fnorm <= FLOOR_SPAN * target and ksp.getConvergedReason() > 0
                 and ksp.getType() != PETSc.KSP.Type.PREONLY)
 
-    def _watch_cycles(self, it, active):
+    def _watch_cycles(self, it, active, fnorm):
         """Damp the Newton steps from the iteration at which the active set returns to one it had two or more
         iterations before (collective). Full semi-smooth steps can cycle among a few sets whose rows sit at
         the contact edge: hertz_xfine with two_pass, started from the previous state, repeated the same six
         residual norms from its 31st iteration (the 31st set came back at the 37th) and did not settle
-        within 50 or 120; damped from the 37th it converged at the 41st."""
+        within 50 or 120; damped from the 37th it converged at the 41st. Also from the iteration that ends
+        STALL_WINDOW iterations without a new lowest residual (fnorm). `cycled`: a set came back."""
         if it == 0:
-            self.sets_seen, self.damped_from = {}, None
+            self.sets_seen, self.damped_from, self.cycled, self.fnorms = {}, None, False, []
+        self.fnorms.append(fnorm)
         digest = _digest(np.packbits(active))
         signature = tuple(self.comm.allgather(digest))
-        if self.damped_from is None and self.sets_seen.get(signature, it) < it - 1:
+        if self.sets_seen.get(signature, it) < it - 1:
+            self.cycled = True
+        # or wandering: no new lowest residual in STALL_WINDOW iterations, the sets never quite repeating (two_pass,
+        # a cube dragged 0.4 m by a sticking die, large sliding: residuals 1e2-1e3 over 50 iterations, twice)
+        stalled = it > STALL_WINDOW and min(self.fnorms[-STALL_WINDOW:]) > min(self.fnorms[:-STALL_WINDOW])
+        if self.damped_from is None and (self.cycled or stalled):
             self.damped_from = it
         self.sets_seen[signature] = it
 

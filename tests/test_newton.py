@@ -15,7 +15,7 @@ from petsc4py import PETSc
 sys.path.insert(0, str(ROOT / "scripts"))
 import bench_contact
 
-from qsc_petsc.solver import FLOOR_SPAN, KRYLOV_MARGIN, START_REACH, START_TOUCHING, System
+from qsc_petsc.solver import FLOOR_SPAN, KRYLOV_MARGIN, STALL_WINDOW, START_REACH, START_TOUCHING, System
 
 SMALL = ["bodies.0.mesh.cells=[3,3,3]", "bodies.1.mesh.cells=[4,4,4]"]
 
@@ -222,10 +222,10 @@ def test_cycle_watch_damps_from_a_returning_active_set():
     same set at consecutive iterations is an iteration converging, not a cycle."""
     A, B, C = (np.array(v, bool) for v in ([1, 0, 1], [1, 1, 1], [0, 0, 1]))
 
-    def watch(sets):
-        ns = SimpleNamespace(comm=MPI.COMM_SELF, sets_seen={}, damped_from=None)
+    def watch(sets, fnorms=None):
+        ns = SimpleNamespace(comm=MPI.COMM_SELF)
         for it, active in enumerate(sets):
-            System._watch_cycles(ns, it, active)
+            System._watch_cycles(ns, it, active, 1.0 / (it + 1) if fnorms is None else fnorms[it])
         return ns.damped_from
 
     assert watch([A, A, A]) is None
@@ -233,6 +233,11 @@ def test_cycle_watch_damps_from_a_returning_active_set():
     assert watch([A, B, A]) == 2
     assert watch([A, B, C, C, B]) == 4
     assert watch([A, B, A, B, A]) == 2       # the first return damps; later ones do not move it
+    # wandering without a repeat: damped once STALL_WINDOW iterations bring no new lowest residual
+    wander = [np.array([(k >> b) & 1 for b in range(5)], bool) for k in range(20)]
+    norms = [1.0, 0.5] + [0.6 + 0.1 * (k % 3) for k in range(18)]
+    assert watch(wander, norms) == STALL_WINDOW + 1
+    assert watch(wander) is None                         # a residual falling every iteration is never damped
 
 
 def test_round_off_floor_rule():
@@ -258,8 +263,8 @@ def test_damped_steps_reach_the_same_answer(tmp_path, monkeypatch):
     run, _ = run_scene(CONFIGS / "hertz_coarse.toml", tmp_path / "full")
     u = run.u.getArray().copy()
 
-    def always(self, it, active):
-        self.damped_from = 0
+    def always(self, it, active, fnorm):
+        self.damped_from, self.cycled = 0, False
 
     monkeypatch.setattr(System, "_watch_cycles", always)
     damped, summary = run_scene(CONFIGS / "hertz_coarse.toml", tmp_path / "damped")
