@@ -631,7 +631,7 @@ class System:
             "ksp_reason": KSP_REASONS.get(ksp_reason, str(ksp_reason)),
             "active_rows": self.active_count(),
             "closed_start": start,          # the rows the increment started closed (None without rows)
-            "damped_from": self.damped_from,   # the Newton iteration where active-set cycling was met, or None
+            "damped_from": self.damped_from,   # the Newton iteration from which steps were damped (cycle or stall)
             "damped_steps": self.damped_steps,
             "tied_rows": self.tied_rows,       # sticking die rows kept closed after cycling (_tie_gates)
             "tied_in_tension": self._tied_in_tension(),   # of those, the ones the answer pulls on
