@@ -250,6 +250,7 @@ class Run:
         update = (lambda u, t: self.contact.terms(u, t)) if self.contact else (lambda u, t: [])
         large = [pair for pair in scene.contact if pair.sliding == "large"]
         settle = self.contact.settle if large else None
+        max_searches = max((pair.max_searches for pair in large), default=2)
         augmented_max = max((pair.augmented_max_iterations for pair in scene.contact
                              if pair.enforcement == "augmented_lagrangian"), default=25)
         before = None         # the converged state before u, (t, Vec), while the predictor extrapolates
@@ -261,7 +262,7 @@ class Run:
                         system, step, t_prev, t, u, update, scene.solver.max_cutbacks,
                         augmented_max=augmented_max, log=self.log,
                         before=before, predict=scene.solver.predictor == "extrapolate", settle=settle,
-                        max_searches=max((pair.max_searches for pair in large), default=2))
+                        max_searches=max_searches)
                 with self.phases("output"):
                     point, cell, ul = self.fields(u)
                     record = self._step_record(step, t, stats, u, ul)

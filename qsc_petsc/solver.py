@@ -77,7 +77,7 @@ class ConstraintTerm:
         self.closed_tol = closed_tol
         self.gate_of = gate_of                            # per existing row: position of its gate row, or -1
         self.augmented = augmented
-        self.augmented_tolerance = 1e-6         # the Uzawa loop's end: its pair's augmented_tolerance
+        self.augmented_tolerance = None         # the Uzawa loop's end: its pair's (set by the contact model)
         self.lmbda = np.zeros(len(self.rows)) if augmented else None
         self.c = G.createVecLeft()
         self.m = G.createVecLeft()

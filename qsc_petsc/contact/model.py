@@ -222,8 +222,8 @@ class ContactModel:
         self.searches = {f"contact[{pd['index']}]": {"load_factor": 0.0, "gap_change": None, "kept": False, "count": 0}
                          for pd in self.pairs}
         self.t = 0.0
-        # per large-sliding pair, over an increment's searches (settle): the configuration U last searched at,
-        # the gap changes, and the relaxation of the next search's configuration
+        # per large-sliding pair, over an increment's searches (settle, _relaxation): the configuration U last
+        # searched at ("at"), the last residual U - at on the pair's surface nodes ("r") and its relaxation ("w")
         self.settling = {}
 
     def _phase(self, name):
