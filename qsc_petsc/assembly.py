@@ -10,6 +10,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from . import elasticity, fem, lattice, sparsity
+from .errors import MeshError, SceneError
 from .expression import compile_expression
 from .mesh import on_all
 
@@ -419,7 +420,7 @@ def surface_load(mesh, scene, template):
     """External force Vec [N] of every pressure boundary at full load."""
     f = template.duplicate()
     f.set(0.0)
-    for bc in scene.boundary:
+    for i, bc in enumerate(scene.boundary):
         if bc.type != "pressure":
             continue
         c, lf = mesh.surface_faces(bc.surface)
@@ -428,6 +429,13 @@ def surface_load(mesh, scene, template):
         # a pressure field varies within faces: a 3-point rule per direction integrates it better than 2
         fe = fem.face_pressure_loads(mesh.face_type, mesh.coords[nodes],
                                      compile_expression(bc.value) if field else bc.value, n_gauss=3 if field else 2)
+        bad = np.flatnonzero(~np.isfinite(fe.reshape(len(fe), -1)).all(axis=1))
+        near = mesh.coords[nodes[bad[0]]].mean(axis=0) if len(bad) else None
+        near = next((x for x in mesh.comm.allgather(near) if x is not None), None)
+        if near is not None:
+            raise SceneError(f"boundary[{i}].value: the pressure {bc.value!r} on {bc.surface} is not finite on "
+                             f"the face near x, y, z = {', '.join(f'{v:.4g}' for v in near)} (a division by zero, "
+                             f"the log or square root of a negative number, or an overflow)")
         dofs = (3 * mesh.gvert[nodes][:, :, None] + np.arange(3)).ravel()
         f.setValues(dofs.astype(PETSc.IntType), fe.ravel(), addv=ADD)
     f.assemble()
@@ -438,7 +446,7 @@ def dirichlet_dofs(mesh, scene):
     """Owned constrained dofs and their values [m] at full load, from displacement and symmetry boundaries.
 
     Returns (dofs, values, per_boundary) where per_boundary[i] lists the owned dofs of boundary i."""
-    dofs, vals, per_bc = [], [], []
+    dofs, vals, where, per_bc = [], [], [], []
     for i, bc in enumerate(scene.boundary):
         if bc.type == "pressure":
             per_bc.append(np.zeros(0, np.int64))
@@ -454,18 +462,39 @@ def dirichlet_dofs(mesh, scene):
             d = 3 * mesh.gvert[v] + comp
             dofs.append(d)
             vals.append(np.full(len(d), float(value)))
+            where.append(np.stack([np.full(len(d), i), v, np.full(len(d), comp)], axis=1))
             mine.append(d)
         per_bc.append(np.concatenate(mine) if mine else np.zeros(0, np.int64))
-    if not dofs:
-        return np.zeros(0, np.int64), np.zeros(0), per_bc
-    dofs, vals = np.concatenate(dofs), np.concatenate(vals)
-    dofs, first = np.unique(dofs, return_index=True)     # a dof on two boundaries keeps its first value
+    dofs = np.concatenate(dofs) if dofs else np.zeros(0, np.int64)
+    vals = np.concatenate(vals) if vals else np.zeros(0)
+    where = np.concatenate(where) if where else np.zeros((0, 3), np.int64)
+    dofs, first, inverse = np.unique(dofs, return_index=True, return_inverse=True)
+    _check_one_value(mesh, scene, vals, where, first[inverse])
     return dofs, vals[first], per_bc
+
+
+def _check_one_value(mesh, scene, vals, where, first_of):
+    """A SceneError (on every rank) if two boundaries prescribe different values to one dof: entry k (value vals[k],
+    (boundary, vertex, component) where[k]) against the first entry of its dof, first_of[k]; the message names
+    the clash at the lowest original vertex id, so that it is the same on any number of ranks (collective)."""
+    clash = np.flatnonzero(np.abs(vals - vals[first_of]) > 1e-12 * np.maximum(np.abs(vals), np.abs(vals[first_of])))
+    found = None
+    if len(clash):
+        k = clash[np.argmin(mesh.vert_orig[where[clash, 1]])]
+        (a, vertex, comp), b = where[first_of[k]], where[k][0]
+        found = (int(mesh.vert_orig[vertex]), int(a), int(b), int(comp), float(vals[first_of[k]]), float(vals[k]),
+                 mesh.coords[vertex].tolist())
+    count = mesh.comm.allreduce(len(clash), op=MPI.SUM)
+    if count:
+        _, a, b, comp, va, vb, x = min(f for f in mesh.comm.allgather(found) if f is not None)
+        u = "xyz"[comp]
+        raise SceneError(f"boundary[{b}]: u{u} = {vb:g} m on {scene.boundary[b].surface} where boundary[{a}] holds "
+                         f"u{u} = {va:g} m ({scene.boundary[a].surface}), on {count} node(s), the first at x, y, z = "
+                         f"{', '.join(f'{c:.4g}' for c in x)}: a node takes one value per component")
 
 
 def symmetry_axis(mesh, index, surface):
     """The axis normal to an axis-aligned symmetry surface (collective: all ranks agree)."""
-    from .errors import MeshError
     c, lf = mesh.surface_faces(surface)
     xf = mesh.coords[mesh.face_nodes(c, lf)]
     n, _ = fem.face_normals(mesh.face_type, xf, fem.CENTROID[mesh.face_type][None, :])

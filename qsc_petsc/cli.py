@@ -1,6 +1,7 @@
 """The qsc command: run, check and --version; PETSc options pass through to the options database."""
 
 import argparse
+import os
 import sys
 import traceback
 
@@ -9,8 +10,25 @@ from .options import init_petsc, split_petsc_args
 EXIT_INPUT, EXIT_SOLVE, EXIT_BUG = 2, 3, 1
 
 
+def launch_rank():
+    """This process's rank as its MPI launcher tells it, read before MPI starts; 0 when no launcher started it."""
+    for key in ("OMPI_COMM_WORLD_RANK", "PMI_RANK", "PMIX_RANK"):
+        if os.environ.get(key, "").isdigit():
+            return int(os.environ[key])
+    return 0
+
+
+class Parser(argparse.ArgumentParser):
+    """argparse that prints usage, help and errors on rank 0 only: under mpirun every rank parses the same
+    arguments and exits with the same code, and one copy of the message is enough."""
+
+    def _print_message(self, message, file=None):
+        if launch_rank() == 0:
+            super()._print_message(message, file)
+
+
 def build_parser():
-    p = argparse.ArgumentParser(
+    p = Parser(
         prog="qsc", description="Parallel contact between deformable bodies with non-matching meshes. "
         "PETSc options (e.g. -qsc_ksp_monitor, -qsc_pc_type lu) may follow the scene.")
     p.add_argument("--version", action="store_true", help="print qsc_petsc, PETSc, petsc4py and MPI versions")

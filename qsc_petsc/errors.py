@@ -15,6 +15,10 @@ class MeshError(QscError):
     """Bad mesh or mesh entity (missing file, unknown surface, degenerate cell)."""
 
 
+class OutputError(QscError):
+    """Results cannot be written where they are to go (the output folder)."""
+
+
 class ConvergenceError(QscError):
     """A solve failed; the message names the reason, the load step and the iteration counts."""
 

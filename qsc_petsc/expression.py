@@ -20,6 +20,10 @@ def _check(node, text):
     if isinstance(node, ast.Expression):
         return _check(node.body, text)
     if isinstance(node, ast.Constant) and isinstance(node.value, (int, float)) and not isinstance(node.value, bool):
+        try:
+            float(node.value)
+        except OverflowError:
+            raise ExpressionError(f"number too large: an integer of {node.value.bit_length()} bits") from None
         return
     if isinstance(node, ast.Name):
         if node.id not in VARIABLES and node.id not in CONSTANTS:
@@ -62,9 +66,15 @@ def compile_expression(text):
     """A function f(points (n, 3)) -> (n,) of the expression text in x, y, z; ExpressionError if it is not valid."""
     try:
         tree = ast.parse(text.strip(), mode="eval")
+        _check(tree, text)
+    except ExpressionError:
+        raise
     except SyntaxError as exc:
         raise ExpressionError(f"not a valid expression ({exc.msg})") from None
-    _check(tree, text)
+    except (RecursionError, MemoryError):
+        raise ExpressionError("nested too deeply to parse") from None
+    except ValueError as exc:          # an integer literal of over 4300 digits
+        raise ExpressionError(f"not a valid expression ({exc})") from None
 
     def f(points):
         points = np.asarray(points, dtype=float).reshape(-1, 3)

@@ -137,6 +137,13 @@ def build_global_mesh(scene):
     """Generate or read every body and merge them into one vertex/cell numbering (rank 0)."""
     points, cells, bodies, masks, names = [], [], [], [], []
     offset, cell_types = 0, set()
+    boxes = [(b, body.mesh) for b, body in enumerate(scene.bodies) if body.mesh.type == "box"]
+    dofs = sum(3 * int(np.prod([n + 1 for n in spec.cells], dtype=object)) for _, spec in boxes)
+    if dofs > np.iinfo(PETSc.IntType).max:       # before any array is made: a box can be too big to allocate
+        b, spec = max(boxes, key=lambda box: np.prod([n + 1 for n in box[1].cells], dtype=object))
+        raise SceneError(f"bodies[{b}].mesh.cells: {list(spec.cells)} makes the generated boxes {dofs} dofs, "
+                         f"more than PETSc's {np.iinfo(PETSc.IntType).bits}-bit indices can number "
+                         f"({np.iinfo(PETSc.IntType).max})")
     for b, body in enumerate(scene.bodies):
         spec = body.mesh
         if spec.type == "box":

@@ -13,8 +13,40 @@ from pathlib import Path
 
 import numpy as np
 
+from .errors import OutputError
+from .mesh import on_root
+
 TOPOLOGY = {"hex": "Hexahedron", "tet": "Tetrahedron"}
 ATTRIBUTE_TYPE = {1: "Scalar", 3: "Vector", 6: "Tensor6"}
+
+
+# what a run writes in its output folder: (name, is a folder)
+RESULTS = (("summary.json", False), ("solution.h5", False), ("solution.xdmf", False), ("steps", True),
+           ("scene.resolved.toml", False), ("petsc_options.txt", False))
+
+
+def check_output_folder(directory):
+    """An OutputError if the results cannot go into `directory` (which exists): a result's name taken by
+    the other kind of entry, or a folder this process may not write in."""
+    for name, folder in RESULTS:
+        path = directory / name
+        if path.exists() and path.is_dir() != folder:
+            raise OutputError(f"output: {str(path)!r} is a {'folder' if path.is_dir() else 'file'}, where the "
+                              f"results put a {'folder' if folder else 'file'}: choose another --out or move it")
+    if not os.access(directory, os.W_OK | os.X_OK):
+        raise OutputError(f"output: cannot write in {str(directory)!r}: permission denied")
+
+
+def write_on_root(comm, path, fn):
+    """fn() on rank 0, which writes `path`; an OSError there becomes the same OutputError on every rank, so that
+    all fail together (collective)."""
+    def guarded():
+        try:
+            return fn()
+        except OSError as exc:
+            raise OutputError(f"output: cannot write {str(exc.filename or path)!r}: "
+                              f"{exc.strerror or exc}") from None
+    return on_root(comm, guarded)
 
 
 def gather_rows(comm, ids, values, n_total):
@@ -43,13 +75,15 @@ class ResultWriter:
             return
         points = gather_rows(self.comm, mesh.vert_orig[self.own_v], mesh.coords[self.own_v], mesh.n_vertices)
         cells = gather_rows(self.comm, mesh.cell_orig, mesh.vert_orig[mesh.cells], mesh.n_cells)
-        if self.comm.rank == 0:
+
+        def write():
             import h5py
             (self.directory / "steps").mkdir(parents=True, exist_ok=True)
             with h5py.File(self.directory / "solution.h5", "w") as h5:
                 h5["mesh/geometry"] = points
                 h5["mesh/topology"] = cells
             self.shape = (len(points), cells.shape)
+        write_on_root(self.comm, self.directory / "solution.h5", write)
 
     def write_step(self, step, time, point_data, cell_data):
         """point_data: name -> (local vertices, k) arrays; cell_data: name -> (local cells, k) arrays."""
@@ -62,18 +96,19 @@ class ResultWriter:
                                                    np.asarray(arr)[self.own_v], mesh.n_vertices)
         for name, arr in cell_data.items():
             gathered[("Cell", name)] = gather_rows(self.comm, mesh.cell_orig, np.asarray(arr), mesh.n_cells)
-        if self.comm.rank != 0:
-            return
-        import h5py
-        with h5py.File(self.directory / "solution.h5", "a") as h5:
-            for (_, name), data in gathered.items():
-                key = f"step_{step:04d}/{name}"
-                if key in h5:
-                    del h5[key]
-                h5[key] = data
-        fields = [(center, name, data.shape) for (center, name), data in gathered.items()]
-        self.steps = [s for s in self.steps if s[0] != step] + [(step, time, fields)]
-        self._write_xml()
+
+        def write():
+            import h5py
+            with h5py.File(self.directory / "solution.h5", "a") as h5:
+                for (_, name), data in gathered.items():
+                    key = f"step_{step:04d}/{name}"
+                    if key in h5:
+                        del h5[key]
+                    h5[key] = data
+            fields = [(center, name, data.shape) for (center, name), data in gathered.items()]
+            self.steps = [s for s in self.steps if s[0] != step] + [(step, time, fields)]
+            self._write_xml()
+        write_on_root(self.comm, self.directory / "solution.h5", write)
 
     def _grid(self, step, time, fields, h5path, with_time=True):
         n_points, (n_cells, k) = self.shape

@@ -19,6 +19,8 @@ MODES = ("translation x", "translation y", "translation z", "rotation about x", 
 FREE_TOL = 1e-9
 # a mode is reported when at least this share of it lies in the free space
 SHOW_TOL = 0.3
+# Restraint.loose: a row whose force is at most this share of the largest row force carries none
+LOOSE_SHARE = 1e-9
 
 
 def rigid_velocities(x, centre, length):
@@ -86,12 +88,14 @@ class Restraint:
         self.gram_bc = held.T @ held
         self.work = template.duplicate()
 
-    def free(self, terms, active_only):
-        """Free motions under the boundary conditions and the terms' rows (all existing rows, or only the active
-        ones): {body name: [mode names]}, the same on every rank (collective)."""
+    def free(self, terms, active_only, masks=None):
+        """Free motions under the boundary conditions and the terms' rows (all existing rows, only the active
+        ones, or per term those a boolean mask over its rows keeps): {body name: [mode names]}, the same on every
+        rank (collective)."""
         gram = self.gram_bc.copy()
-        for term in terms:
-            keep = term.active if active_only else np.ones(len(term.rows), dtype=bool)
+        for i, term in enumerate(terms):
+            keep = (masks[i] if masks is not None else term.active if active_only
+                    else np.ones(len(term.rows), dtype=bool))
             rows = term.rows[keep]
             W = term.W.getArray()[rows]
             y = term.G.createVecLeft()
@@ -105,6 +109,18 @@ class Restraint:
         total = np.empty_like(gram)
         self.comm.Allreduce(gram, total, op=MPI.SUM)
         return free_motions(total, self.names)
+
+    def loose(self, terms):
+        """The motions that only active rows carrying no force hold (their force at most LOOSE_SHARE of the
+        largest row force of all terms): {body name: [mode names]}, empty if the boundary conditions and the
+        rows that press hold every body (collective). Such a body sits where the Newton iterations left it:
+        any position along those motions that keeps its rows open is an equilibrium too."""
+        forces = [np.abs(term.m.getArray()[term.rows]) for term in terms]
+        largest = self.comm.allreduce(max((float(f.max(initial=0.0)) for f in forces), default=0.0), op=MPI.MAX)
+        pressing = [term.active & (f > LOOSE_SHARE * largest) for term, f in zip(terms, forces)]
+        if self.comm.allreduce(all(np.array_equal(p, term.active) for p, term in zip(pressing, terms)), op=MPI.LAND):
+            return {}                   # every active row carries force: the solve's own check holds
+        return self.free(terms, True, pressing)
 
     def destroy(self):
         self.work.destroy()

@@ -14,7 +14,7 @@ from petsc4py import PETSc
 from . import __version__, assembly, elasticity, lattice, options, preconditioner
 from .errors import QscError, SceneError
 from .mesh import distribute_mesh, on_root
-from .output import ResultWriter, write_json
+from .output import ResultWriter, check_output_folder, write_json, write_on_root
 from .restraint import Restraint, describe
 from .solver import System, solve_load_step
 
@@ -102,6 +102,8 @@ def peak_memory_mib(comm):
 
 
 def prepare_output(scene, out_dir, comm):
+    if isinstance(out_dir, str) and not out_dir.strip():
+        raise SceneError("--out: an empty folder name (omit --out for the scene's output.directory)")
     directory = Path(out_dir if out_dir else scene.output.directory.replace("{name}", scene.name))
 
     def make():
@@ -109,6 +111,7 @@ def prepare_output(scene, out_dir, comm):
             directory.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
             raise SceneError(f"output.directory: cannot create {str(directory)!r}: {exc.strerror}") from None
+        check_output_folder(directory)
     on_root(comm, make)
     return directory
 
@@ -166,8 +169,8 @@ class Run:
             from .contact.model import ContactModel
             self.contact = ContactModel(mesh, scene, u, self.phases)
         self.writer = ResultWriter(mesh, self.out, scene.output.xdmf)
-        if comm.rank == 0:
-            (self.out / "scene.resolved.toml").write_text(scene.to_toml())
+        path = self.out / "scene.resolved.toml"
+        write_on_root(comm, path, lambda: path.write_text(scene.to_toml()))
         self.summary = self._summary_header()
 
     def _summary_header(self):
@@ -232,8 +235,8 @@ class Run:
     def write_summary(self):
         self.summary["time"] = self.phases.summary()
         self.summary["peak_memory_mib"] = peak_memory_mib(self.comm)
-        if self.comm.rank == 0:
-            write_json(self.out / "summary.json", self.summary)
+        path = self.out / "summary.json"
+        write_on_root(self.comm, path, lambda: write_json(path, self.summary))
 
     def execute(self):
         """Run every load step and return the summary; the scene's PETSc options leave the database when it
@@ -244,7 +247,7 @@ class Run:
             options.remove_options(self.from_scene)
 
     def _load_steps(self):
-        scene, system, comm = self.scene, self.system, self.comm
+        scene, system = self.scene, self.system
         n_steps = scene.load.steps
         u = system.u.copy()
         update = (lambda u, t: self.contact.terms(u, t)) if self.contact else (lambda u, t: [])
@@ -254,6 +257,7 @@ class Run:
         augmented_max = max((pair.augmented_max_iterations for pair in scene.contact
                              if pair.enforcement == "augmented_lagrangian"), default=25)
         before = None         # the converged state before u, (t, Vec), while the predictor extrapolates
+        last_loose = ""       # the last step's loose motions (Restraint.loose), warned when they change
         try:
             for step in range(1, n_steps + 1):
                 t_prev, t = (step - 1) / n_steps, step / n_steps
@@ -271,6 +275,15 @@ class Run:
                         point.update(cpoint)
                         for line in self.contact.slip_warnings(record["contact"]):
                             self.log(f"step {step}: warning: {line}")
+                        loose = describe(self.restraint.loose(system.terms))
+                        if loose:
+                            record["loose"] = loose
+                        if loose and loose != last_loose:
+                            self.log(f"step {step}: warning: {loose}: held there only by contact rows that carry "
+                                     f"no force, so the scene does not set its position along that motion (this "
+                                     f"answer is one of many); hold it with a boundary condition, or a die or "
+                                     f"contact within reach that presses on it (summary: loose)")
+                        last_loose = loose
                     self.writer.write_step(step, t, point, cell)
                     self.summary["steps"].append(record)
                     self.write_summary()
@@ -285,16 +298,21 @@ class Run:
         except QscError as exc:
             self.summary["status"] = "failed"
             self.summary["error"] = str(exc)
-            self.write_summary()
+            self._finish()
             raise
         self.summary["status"] = "ok"
-        self.summary["petsc_options"] = options.options_in_effect()
-        self.write_summary()
-        if comm.rank == 0:
-            (self.out / "petsc_options.txt").write_text(
-                options.options_text(options.options_in_effect(), self.from_scene))
+        self._finish()
         self.u = u
         return self.summary
+
+    def _finish(self):
+        """summary.json and petsc_options.txt at the end of the run, failed or not: the options a failed run ran
+        with are what its user changes next (collective)."""
+        self.summary["petsc_options"] = options.options_in_effect()
+        self.write_summary()
+        path = self.out / "petsc_options.txt"
+        write_on_root(self.comm, path, lambda: path.write_text(
+            options.options_text(options.options_in_effect(), self.from_scene)))
 
     def _step_record(self, step, t, stats, u, ul):
         last = stats["solves"][-1]

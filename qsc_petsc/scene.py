@@ -18,6 +18,10 @@ OPTIONS_PREFIX = "qsc_"  # root of every PETSc options prefix; the program adds 
 BODY_NAME = r"[A-Za-z_][A-Za-z0-9_]*"
 BOX_SURFACES = ("xmin", "xmax", "ymin", "ymax", "zmin", "zmax")
 REQUIRED = object()
+# every number of a scene is 0 or of magnitude within [MIN_MAGNITUDE, MAX_MAGNITUDE]: lengths, moduli and
+# penalties are multiplied and squared downstream (eps_n = alpha E / h, norms of forces), and a value near the
+# floating-point limits overflowed there into a traceback (a box 1e308 m wide) or an infinite stiffness
+MAX_MAGNITUDE, MIN_MAGNITUDE = 1e100, 1e-100
 
 
 # ---------------------------------------------------------------- TOML text
@@ -79,6 +83,8 @@ def _show(value: Any, limit: int = 60) -> str:
         text = _toml_value(value)
     except TypeError:
         text = _toml_string(str(value))
+    except ValueError:          # an integer past Python's 4300-digit str limit
+        text = f"an integer of {value.bit_length()} bits"
     return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
@@ -144,8 +150,15 @@ class Float(Field):
     def _number(self, value, path):
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise self.wrong_type(value, path, self._also())
-        if not math.isfinite(value):
+        try:
+            finite = math.isfinite(value)
+        except OverflowError:           # an integer beyond any float
+            finite = False
+        if not finite:
             raise SceneError(f"{path}: expected a finite number, got {_show(value)}")
+        if value != 0 and not MIN_MAGNITUDE <= abs(value) <= MAX_MAGNITUDE:
+            raise SceneError(f"{path}: must be 0 or of magnitude between {MIN_MAGNITUDE:g} and {MAX_MAGNITUDE:g}, "
+                             f"got {_show(value)}")
         if not all(_COMPARE[op](value, bound) for op, bound in self.bounds):
             raise SceneError(f"{path}: must be {self.range_text()}{self._also()}, got {_show(value)}")
         return value
@@ -163,11 +176,16 @@ class Float(Field):
 
 
 class Int(Float):
+    """An integer; at most INT_MAX unless a bound says less (PETSc and MPI take C ints)."""
+
     kind, noun = "int", "an integer"
+    INT_MAX = 2**31 - 1
 
     def check(self, value, path):
         if not isinstance(value, int) or isinstance(value, bool):
             raise self.wrong_type(value, path)
+        if value > self.INT_MAX and not any(op in ("<", "<=") for op, _ in self.bounds):
+            raise SceneError(f"{path}: must be at most {self.INT_MAX}, got {_show(value)}")
         return int(self._number(value, path))
 
 
@@ -196,6 +214,20 @@ class Str(Field):
 
     def range_text(self):
         return f"`^{self.pattern}$`" if self.pattern else ""
+
+
+class FolderName(Str):
+    """A string that names a folder: not empty, ".", "..", nor holding a path separator or a control character."""
+
+    def check(self, value, path):
+        value = super().check(value, path)
+        if value in ("", ".", "..") or re.search(r"[/\\\x00-\x1f]", value):
+            raise SceneError(f"{path}: names the output folder: must be a non-empty name without / or \\ "
+                             f"(not . or ..), got {_show(value)}")
+        return value
+
+    def range_text(self):
+        return "a folder name: no / or \\, not . or .."
 
 
 class SurfaceRef(Str):
@@ -509,7 +541,7 @@ DIE = Table({
 })
 
 SCHEMA = Table({
-    "name": Str("Scene name, used in the output folder.", show_default="file name without .toml"),
+    "name": FolderName("Scene name, used in the output folder.", show_default="file name without .toml"),
     "description": Str("Free text describing the scene.", default=""),
     "bodies": ListOf(BODY, "The deformable bodies (at least one).", min_len=1),
     "boundary": ListOf(BOUNDARY, "Boundary conditions on body surfaces.", default=[]),
@@ -517,10 +549,11 @@ SCHEMA = Table({
     "die": ListOf(DIE, "Rigid flat dies pressed against body surfaces.", default=[]),
     "load": Table({
         "steps": Int("Load steps; loads and prescribed displacements ramp linearly to full at the last.", ge=1,
-                     default=1),
+                     le=1_000_000, default=1),
     }, "Load stepping."),
     "solver": Table({
-        "max_cutbacks": Int("How many times a failed load step is halved before the run stops.", ge=0, default=4),
+        "max_cutbacks": Int("How many times a failed load step is halved before the run stops.", ge=0, le=30,
+                            default=4),
         "max_active_set_iterations": Int("Most active-set (semi-smooth Newton) iterations per load step.", ge=1,
                                          default=60),
         "active_set_tolerance": Float("Relative closed-set tolerance on the constraint rows.", gt=0, default=1e-12),
@@ -670,7 +703,7 @@ def _parse_override(text: str) -> tuple[list[str | int], Any]:
         raise SceneError(f"{_show(text)}: override must be key.path=value, e.g. load.steps=4")
     try:
         parsed = tomllib.loads(f"v = {raw.strip()}")
-    except tomllib.TOMLDecodeError:
+    except (tomllib.TOMLDecodeError, ValueError):      # ValueError: an integer of over 4300 digits
         return segments, raw.strip()  # not a TOML value: a bare string such as two_pass
     return segments, parsed["v"] if len(parsed) == 1 else raw.strip()
 
@@ -789,7 +822,7 @@ def load_scene(path: str | os.PathLike, overrides: Sequence[str] = ()) -> Scene:
         raise SceneError(f"{path}: scene file not found") from None
     except (OSError, UnicodeDecodeError) as exc:
         raise SceneError(f"{path}: cannot read scene file: {exc}") from None
-    except tomllib.TOMLDecodeError as exc:
+    except (tomllib.TOMLDecodeError, ValueError) as exc:     # ValueError: an integer of over 4300 digits
         raise SceneError(f"{path}: invalid TOML: {exc}") from None
     return parse_scene(data, path.parent, path.stem, overrides)
 

@@ -857,7 +857,7 @@ def solve_load_step(system, step, t_prev, t_target, u, update_terms, max_cutback
         u_new.destroy()
         failed = True
         cutbacks += 1
-        if log:
+        if log and cutbacks <= max_cutbacks:
             log(f"step {step}: solve at load factor {t_try:.6g} failed "
                 f"({stats['snes_reason']}, KSP {stats['ksp_reason']}); cutting the increment in half")
         if cutbacks > max_cutbacks:

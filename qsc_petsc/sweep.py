@@ -182,6 +182,10 @@ def make_plan(argv):
             raise SweepInputError(f"{v.source!r}: {v.key} is also given as a PETSc option for every run")
         if v.kind == "scene" and v.key in set_keys:
             raise SweepInputError(f"{v.source!r}: {v.key} is also given by --set")
+    if args.timeout is not None and not args.timeout > 0:
+        raise SweepInputError(f"--timeout: must be a positive number of seconds, got {args.timeout:g}")
+    if args.out == "":
+        raise SweepInputError("--out: an empty folder name (omit --out for results/<scene name>_sweep)")
     try:
         scene = load_scene(args.scene, args.set)
     except SceneError as exc:

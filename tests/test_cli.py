@@ -211,8 +211,32 @@ def _unavailable_partitioner(tmp):
                                                                           "parmetis", "not available"]
 
 
+def _huge_box(tmp):
+    # refused before any array is made (the box would not fit in memory either)
+    return [block_scene(tmp, mesh='type = "box", size = [1.0, 1.0, 1.0], cells = [2000, 2000, 2000]')], [
+        "bodies[0].mesh.cells", "[2000, 2000, 2000]", "24036018003 dofs", "32-bit"]
+
+
+def _pressure_not_finite(tmp):
+    return [block_scene(tmp, extra=PRESSED.replace("value = 1.0", 'value = "1 / (z - 1)"'))], [
+        "boundary[1].value", "'1 / (z - 1)'", "blk.zmax", "not finite"]
+
+
+def _conflicting_boundaries(tmp):
+    extra = '\n[[boundary]]\nsurface = "blk.zmin"\ntype = "displacement"\nuz = 0.1\n'
+    return [block_scene(tmp, extra=extra)], [
+        ("boundary[1]: uz = 0.1 m on blk.zmin where boundary[0] holds uz = 0 m (blk.zmin), on 9 node(s), the first "
+         "at x, y, z = 0, 0, 0")]
+
+
+def _result_name_taken(tmp):
+    (tmp / "out" / "solution.h5").mkdir(parents=True)      # where the run would write its fields
+    return [block_scene(tmp)], ["output:", "solution.h5", "is a folder"]
+
+
 BAD_INPUT = [_unknown_key, _wrong_type, _negative_modulus, _missing_mesh_file, _unknown_box_surface,
-             _unknown_file_surface, _not_a_mesh, _unknown_set_path, _set_missing_entry, _unavailable_partitioner]
+             _unknown_file_surface, _not_a_mesh, _unknown_set_path, _set_missing_entry, _unavailable_partitioner,
+             _huge_box, _pressure_not_finite, _conflicting_boundaries, _result_name_taken]
 SERIAL_OK = {_unavailable_partitioner}     # cases that only fail in parallel
 
 
@@ -249,6 +273,17 @@ def test_bad_input_is_one_line_and_exit_2(bad_input_runs, case, ranks):
     assert lines[0].startswith("qsc: error: "), out
     for text in expected:
         assert text in lines[0], (text, lines[0])
+
+
+@pytest.mark.parametrize("ranks", RANKS)
+def test_argument_errors_print_once(tmp_path, ranks):
+    """An unknown command and an empty --out shall be one line however many ranks parse them."""
+    code, out = qsc(["frobnicate"], ranks, cwd=tmp_path)
+    assert code == 2 and [line for line in own_lines(out) if "error" in line] == [
+        "qsc: error: argument command: invalid choice: 'frobnicate' (choose from 'run', 'check', 'sweep')"], out
+    code, out = qsc(["run", CONFIGS / "patch_test.toml", "--out", ""], ranks, cwd=tmp_path)
+    assert code == 2 and own_lines(out) == [
+        "qsc: error: --out: an empty folder name (omit --out for the scene's output.directory)"], out
 
 
 def test_missing_scene_file(tmp_path):
@@ -325,9 +360,11 @@ def test_failed_load_step_exits_3_and_keeps_earlier_steps(tmp_path, ranks):
     assert lines[-1].startswith("qsc: solve failed: load step 2 "), out
     assert "SNES DIVERGED_MAX_IT" in lines[-1], out
     assert any(line.startswith("step 1/2: ") for line in lines), out
+    assert sum("cutting the increment in half" in line for line in lines) == 1, out    # max_cutbacks = 1
     summary = _summary(tmp_path / "out")
     assert summary["status"] == "failed"
     assert summary["error"] in lines[-1]
+    assert "-qsc_snes_max_it" in (tmp_path / "out" / "petsc_options.txt").read_text()   # what to change next
     assert [s["step"] for s in summary["steps"]] == [1]
     assert not (tmp_path / "out" / "steps" / "step_0002.xdmf").exists()
     step1 = meshio.read(tmp_path / "out" / "steps" / "step_0001.xdmf")
@@ -336,6 +373,37 @@ def test_failed_load_step_exits_3_and_keeps_earlier_steps(tmp_path, ranks):
     with meshio.xdmf.TimeSeriesReader(tmp_path / "out" / "solution.xdmf") as series:
         series.read_points_cells()
         assert series.num_steps == 1
+
+
+@pytest.mark.parametrize("ranks", RANKS)
+def test_result_that_cannot_be_written_stops_every_rank(tmp_path, ranks):
+    """A result file that cannot be written mid-run (here: a folder in the way of step 2's file) shall stop
+    every rank with exit 2 and one line naming the path, summary.json saying "failed" and step 1 kept."""
+    out = tmp_path / "out"
+    (out / "steps" / "step_0002.xdmf.tmp").mkdir(parents=True)
+    code, text = qsc(["run", block_scene(tmp_path, extra=PRESSED), "--out", out, "--set", "load.steps=2"], ranks)
+    lines = own_lines(text)
+    assert code == 2 and "Traceback" not in text, text
+    assert lines[-1] == f"qsc: error: output: cannot write {str(out / 'steps' / 'step_0002.xdmf.tmp')!r}: Is a directory"
+    summary = _summary(out)
+    assert summary["status"] == "failed" and summary["error"] in lines[-1]
+    assert meshio.read(out / "steps" / "step_0001.xdmf").point_data["displacement"].shape == (27, 3)
+
+
+@pytest.mark.parametrize("ranks", RANKS)
+def test_body_held_only_by_rows_without_force_is_warned(tmp_path, ranks):
+    """The quarter two-cube stack with its bottom die out of reach: the top die moves both cubes down as one
+    rigid body, held only by contact rows that press with no force. The answer is an equilibrium, one of many:
+    the run succeeds, and warns once, naming the bodies and motion (summary: loose)."""
+    code, text = qsc(["run", CONFIGS / "two_cubes_quarter.toml", "--out", tmp_path, "--set", "die.0.point=[0, 0, -10]",
+                      "--set", "bodies.1.mesh.cells=[3, 3, 6]"], ranks)
+    assert code == 0, text
+    warnings = [line for line in own_lines(text) if "warning" in line]
+    assert len(warnings) == 1 and warnings[0].startswith(
+        "step 1: warning: lower (translation z); upper (translation z): held there only by contact rows that "
+        "carry no force"), text
+    assert [step.get("loose") for step in _summary(tmp_path)["steps"]] == [
+        "lower (translation z); upper (translation z)"] * 2
 
 
 @pytest.mark.parametrize("ranks", RANKS)

@@ -52,6 +52,7 @@ def test_scene_runs(comm, mpi_tmp, path):
     for step in summary["steps"]:
         assert step["snes_reason"].startswith("CONVERGED"), step
         assert step["max_abs_displacement"] > 0.0
+        assert "loose" not in step, step          # every body held by a boundary or by rows that press
     names = ("summary.json", "scene.resolved.toml", "petsc_options.txt", "solution.xdmf", "solution.h5")
     written = [name for name in names if (mpi_tmp / name).is_file()] if comm.rank == 0 else None
     assert comm.bcast(written, root=0) == list(names)        # rank 0 writes them, and has by now

@@ -24,6 +24,9 @@ def test_expression_evaluates_on_points():
     ("1 +", "not a valid expression"),
     ("sin(x, y)", "bad function call"),
     ("[x]", "not allowed"),
+    ("1" + "+1" * 20000, "nested too deeply"),        # Python's parser itself recurses too deep
+    ("-" * 5000 + "1", "nested too deeply"),
+    ("1" + "0" * 400 + " * x", "number too large"),     # an integer beyond any float
 ])
 def test_bad_expressions_are_refused(text, message):
     with pytest.raises(ExpressionError, match=message):
@@ -52,3 +55,13 @@ def test_pressure_field_loads_integrate_the_field():
     # the moment about the y axis, int x p dA = int x (2 + x y) = 1 + 1/6, is matched by the consistent loads
     moment = np.einsum("mv,mv->", xyz[quads][..., 0], loads[..., 2])
     assert moment == pytest.approx(-(1 + 1 / 6), rel=1e-13)
+
+
+@pytest.mark.parametrize("value", ["1/0", "sqrt(-1)", "10**400", "1/(x - x)"])
+def test_pressure_that_is_not_finite_is_a_scene_error(value, tmp_path):
+    """A pressure expression that evaluates to inf or NaN on a face shall be a SceneError naming the key and
+    where, not a solve that fails with DIVERGED_FNORM_NAN after every cutback."""
+    from conftest import run_scene
+    with pytest.raises(SceneError, match=r"^boundary\[5\]\.value: the pressure .* on upper\.zmax is not finite "
+                                          r"on the face near x, y, z = "):
+        run_scene(CONFIGS / "patch_test.toml", tmp_path, [f"boundary.5.value={value!r}"])

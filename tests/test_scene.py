@@ -152,7 +152,7 @@ CASES = [
     (_set(["load"], {"steps": "four"}), 'load.steps: expected an integer, got "four"'),
     (_set(["load"], {"steps": 2.0}), "load.steps: expected an integer, got 2.0"),
     (_set(["load"], {"steps": True}), "load.steps: expected an integer, got true"),
-    (_set(["load"], {"steps": 0}), "load.steps: must be >= 1, got 0"),
+    (_set(["load"], {"steps": 0}), "load.steps: must be >= 1 and <= 1000000, got 0"),
     (_set(["load"], 3), "load: expected a table, got 3"),
     (_set(["bodies", 1, "material", "youngs_modulus"], -3),
      "bodies[1].material.youngs_modulus: must be > 0, got -3"),
@@ -182,7 +182,23 @@ CASES = [
     (_set(["contact", 0, "enforcement"], "lagrange"), "contact[0].enforcement: must be one of "),
     (_set(["contact", 0, "augmented_max_iterations"], 0), "contact[0].augmented_max_iterations: must be >= 1, got 0"),
     (_set(["contact", 0, "slave"], "top"), 'contact[0].slave: expected a "body.surface" string, got "top"'),
-    (_set(["solver"], {"max_cutbacks": -1}), "solver.max_cutbacks: must be >= 0, got -1"),
+    (_set(["solver"], {"max_cutbacks": -1}), "solver.max_cutbacks: must be >= 0 and <= 30, got -1"),
+    (_set(["name"], "../../elsewhere"),
+     'name: names the output folder: must be a non-empty name without / or \\ (not . or ..), got "../../elsewhere"'),
+    (_set(["name"], ""), 'name: names the output folder'),
+    (_set(["solver"], {"max_cutbacks": 31}), "solver.max_cutbacks: must be >= 0 and <= 30, got 31"),
+    (_set(["load"], {"steps": 10**30}), "load.steps: must be >= 1 and <= 1000000, got 1000000000000000000000000000000"),
+    (_set(["load"], {"steps": 10**400}), "load.steps: expected a finite number, got 1000000000"),
+    (_set(["solver"], {"max_active_set_iterations": 2**31}),
+     "solver.max_active_set_iterations: must be at most 2147483647, got 2147483648"),
+    (_set(["bodies", 1, "material", "youngs_modulus"], 10**400),
+     "bodies[1].material.youngs_modulus: expected a finite number, got 1000000000"),
+    (_set(["bodies", 1, "material", "youngs_modulus"], 1e308),
+     "bodies[1].material.youngs_modulus: must be 0 or of magnitude between 1e-100 and 1e+100, got 1e+308"),
+    (_set(["bodies", 0, "mesh", "origin"], [0, 0, -1e-300]),
+     "bodies[0].mesh.origin[2]: must be 0 or of magnitude between 1e-100 and 1e+100, got -1e-300"),
+    (_set(["die", 0, "normal"], [0, 0, 1e200]),
+     "die[0].normal[2]: must be 0 or of magnitude between 1e-100 and 1e+100, got 1e+200"),
     (_set(["output"], {"xdmf": "yes"}), 'output.xdmf: expected true or false, got "yes"'),
     # fixed-length vectors
     (_set(["bodies", 0, "mesh", "size"], [1, 1]), "bodies[0].mesh.size: expected a list of 3 numbers, got [1, 1]"),
@@ -228,6 +244,15 @@ def test_validation_message(mutate, expected):
     data = two_cubes()
     mutate(data)
     assert error_of(data).startswith(expected)
+
+
+def test_integer_of_over_4300_digits():
+    """TOML integers past Python's int-to-str limit shall be a one-line scene error too (tomllib raises a bare
+    ValueError for them), in the file and in an override."""
+    data = two_cubes()
+    data["load"] = {"steps": 10**5000}
+    assert error_of(data) == "load.steps: expected a finite number, got an integer of 16610 bits"
+    assert error_of(two_cubes(), ["load.steps=" + "1" * 5000]).startswith('load.steps: expected an integer, got "111')
 
 
 def test_none_counts_as_absent():
@@ -295,7 +320,7 @@ def test_overrides_parse_toml_values_or_bare_strings():
 
 
 def test_overrides_are_validated_like_the_file():
-    assert error_of(two_cubes(), ["load.steps=0"]) == "load.steps: must be >= 1, got 0"
+    assert error_of(two_cubes(), ["load.steps=0"]) == "load.steps: must be >= 1 and <= 1000000, got 0"
     assert error_of(two_cubes(), ["load.stesp=2"]) == "load.stesp: unknown key (expected one of: steps)"
     assert error_of(two_cubes(), ["load.steps=four"]) == 'load.steps: expected an integer, got "four"'
 

@@ -57,6 +57,7 @@ def test_pareto_front():
     (["--vary", "contact.0.penalty=1e2", "--vary", "contact.0.penalty=1e4"], "varied twice"),
     (["--vary", "contact.0.penalty=1e2", "--reference", "bodies.7.mesh.cells=[2,2,2]"], "bodies[7]"),
     (["--vary", "petsc.pc_type=lu", "-qsc_pc_type", "lu", "--vary", "-qsc_pc_type=gamg,lu"], "-qsc_pc_type"),
+    (["--vary", "contact.0.penalty=1e2,1e4", "--timeout", "-5"], "--timeout: must be a positive number"),
 ])
 def test_bad_arguments_exit_2_before_any_run(tmp_path, capsys, args, names):
     out = tmp_path / "sweep"
@@ -64,6 +65,11 @@ def test_bad_arguments_exit_2_before_any_run(tmp_path, capsys, args, names):
     text = capsys.readouterr().out
     assert len(text.strip().splitlines()) == 1 and names in text, text
     assert not out.exists()
+
+
+def test_empty_out_is_refused(capsys):
+    assert cli.main(["sweep", SCENE, "--out", ""] + TINY + ["--vary", "contact.0.penalty=1e2,1e4"]) == 2
+    assert "--out: an empty folder name" in capsys.readouterr().out
 
 
 @pytest.mark.skipif(shutil.which("mpirun") is None, reason="mpirun not found")
