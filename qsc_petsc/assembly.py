@@ -429,7 +429,7 @@ def surface_load(mesh, scene, template):
         # a pressure field varies within faces: a 3-point rule per direction integrates it better than 2
         fe = fem.face_pressure_loads(mesh.face_type, mesh.coords[nodes],
                                      compile_expression(bc.value) if field else bc.value, n_gauss=3 if field else 2)
-        bad = np.flatnonzero(~np.isfinite(fe.reshape(len(fe), -1)).all(axis=1))
+        bad = np.flatnonzero(~np.isfinite(fe).all(axis=tuple(range(1, fe.ndim))))      # a rank may hold no face
         near = mesh.coords[nodes[bad[0]]].mean(axis=0) if len(bad) else None
         near = next((x for x in mesh.comm.allgather(near) if x is not None), None)
         if near is not None:

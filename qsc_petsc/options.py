@@ -86,6 +86,28 @@ def options_text(options, from_scene):
     return "\n".join(lines) + "\n"
 
 
+def check_tolerances():
+    """A SceneError for a -qsc_*_rtol / _atol / _stol / _divtol or _max_it option whose number is negative or
+    infinite: PETSc takes a negative tolerance as its own default without a word, and the solve then failed
+    with a reason that did not name the option. A value that is no number is left to PETSc, whose message
+    names it (set_from_options)."""
+    import re
+
+    from .errors import SceneError
+    for name, value in options_in_effect().items():
+        kind = re.search(r"_(rtol|atol|stol|divtol|max_it)$", name) if name.startswith(PREFIX) else None
+        if kind is None:
+            continue
+        integer = kind.group(1) == "max_it"
+        try:
+            number = int(value) if integer else float(value)
+        except ValueError:
+            continue
+        if not number >= 0 or (not integer and number == float("inf")):
+            raise SceneError(f"-{name}: must be {'an integer' if integer else 'a finite number'} >= 0, "
+                             f"got {value!r}")
+
+
 # PETSc error codes that setFromOptions raises for a bad option: wrong argument, out of range (a value
 # that does not parse), a value that is none of the option's choices, unknown type (a misspelt or
 # missing solver package)

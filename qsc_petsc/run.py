@@ -135,6 +135,7 @@ class Run:
 
     def _build(self, scene, comm):
         """Mesh, operators, solver, contact model and output writer, in that order."""
+        options.check_tolerances()
         with self.phases("mesh"):
             self.mesh = distribute_mesh(scene, comm)
         mesh = self.mesh

@@ -229,6 +229,10 @@ def _conflicting_boundaries(tmp):
          "at x, y, z = 0, 0, 0")]
 
 
+def _negative_tolerance(tmp):
+    return [block_scene(tmp), "-qsc_ksp_rtol", "-1"], ["-qsc_ksp_rtol: must be a finite number >= 0, got '-1'"]
+
+
 def _result_name_taken(tmp):
     (tmp / "out" / "solution.h5").mkdir(parents=True)      # where the run would write its fields
     return [block_scene(tmp)], ["output:", "solution.h5", "is a folder"]
@@ -236,7 +240,7 @@ def _result_name_taken(tmp):
 
 BAD_INPUT = [_unknown_key, _wrong_type, _negative_modulus, _missing_mesh_file, _unknown_box_surface,
              _unknown_file_surface, _not_a_mesh, _unknown_set_path, _set_missing_entry, _unavailable_partitioner,
-             _huge_box, _pressure_not_finite, _conflicting_boundaries, _result_name_taken]
+             _huge_box, _pressure_not_finite, _conflicting_boundaries, _negative_tolerance, _result_name_taken]
 SERIAL_OK = {_unavailable_partitioner}     # cases that only fail in parallel
 
 

@@ -256,8 +256,8 @@ def test_large_sliding_is_validated_and_unsettled_increments_are_cut(tmp_path):
         run_scene(CONFIGS / "two_cubes_dies.toml", tmp_path / "cut",
                   SLIDE + ["load.steps=1", 'contact.0.sliding="large"', "contact.0.max_searches=2",
                            "solver.max_cutbacks=1"], log=lines.append)
-    failed = [line for line in lines if " failed " in line]
-    assert len(failed) == 2 and all("(SEARCH_NOT_SETTLED, KSP" in line for line in failed)
+    failed = [line for line in lines if " failed " in line]     # the one cutback's; the error says the last try's
+    assert len(failed) == 1 and "(SEARCH_NOT_SETTLED, KSP" in failed[0]
     summary = json.loads((tmp_path / "cut" / "summary.json").read_text())
     assert summary["status"] == "failed" and "SEARCH_NOT_SETTLED" in summary["error"]
 
