@@ -126,5 +126,18 @@ def set_from_options(obj, what):
     except PETSc.Error as exc:
         if exc.ierr not in _OPTION_ERRORS:
             raise
-        raise SceneError(f"PETSc options of the {what}: {_OPTION_ERRORS[exc.ierr]} (PETSc error {exc.ierr} in "
-                         f"{petsc_detail(exc)})") from None
+        detail = petsc_detail(exc)
+        raise SceneError(f"PETSc options of the {what}: {_OPTION_ERRORS[exc.ierr]}{_holders(detail)} (PETSc error "
+                         f"{exc.ierr} in {detail})") from None
+
+
+def _holders(detail):
+    """The options PETSc's message is about, as ' in -name': those whose value it quotes as not a number (it names
+    the value, not the option), or a type option given no value; '' if none is found."""
+    import re
+    quoted = re.search(r"Input string (\S+) has no numeric value", detail)
+    names = [f"-{name}" for name, value in options_in_effect().items() if quoted and value == quoted.group(1)]
+    if "Unable to find requested" in detail:        # a type option given no value: PETSc quotes an empty name
+        names = [f"-{name} (no value given)" for name, value in options_in_effect().items()
+                 if name.startswith(PREFIX) and name.endswith("_type") and not value]
+    return f" in {', '.join(names)}" if names else ""

@@ -473,7 +473,7 @@ def test_command_line_options_win_over_the_scene(tmp_path):
     assert step["ksp_iterations"] == step["snes_iterations"] >= 1
 
 
-@pytest.mark.parametrize("option", [["-qsc_pc_type", "nonexistent"], ["-qsc_ksp_rtol", "abc"],
+@pytest.mark.parametrize("option", [["-qsc_pc_type", "nonexistent"], ["-qsc_ksp_rtol", "abc"], ["-qsc_ksp_type"],
                                     ["-qsc_pc_type", "hypre", "-qsc_pc_hypre_boomeramg_relax_type_down", "nonsense"]])
 def test_bad_petsc_option_is_an_input_error(tmp_path, option):
     """A PETSc option PETSc refuses (unknown type, value that does not parse, none of its choices) shall exit 2
@@ -486,6 +486,10 @@ def test_bad_petsc_option_is_an_input_error(tmp_path, option):
     # PETSc's own message is quoted (petsc4py keeps it in the exception, nothing else prints it)
     assert f"{option[-1]}" in proc.stdout.splitlines()[-1], proc.stdout
     assert "Traceback" not in proc.stderr + proc.stdout
+    if option[-1] == "abc":     # PETSc names the value only: qsc names the option that holds it
+        assert "a value out of range or not a number in -qsc_ksp_rtol (PETSc error 63" in proc.stdout, proc.stdout
+    if option == ["-qsc_ksp_type"]:     # PETSc names an empty type: qsc names the option
+        assert "an unknown type in -qsc_ksp_type (no value given) (PETSc error 86" in proc.stdout, proc.stdout
 
 
 BAND_OPTIONS = {
