@@ -133,14 +133,55 @@ def on_all(comm, fn):
     return result
 
 
+# The least memory a run takes, measured (docs/performance.md, elasticity: 985k dofs in 2205 MiB on one rank):
+# about 2 KiB per dof, and 150 MiB per process for Python, PETSc and MPI. A scene below it cannot fit.
+MEMORY_PER_DOF, MEMORY_PER_RANK = 2048, 150 * 2**20
+
+
+def box_dofs(scene):
+    """(dofs of the scene's generated boxes, (index, mesh spec) of the largest box or None), from the scene alone."""
+    boxes = [(b, body.mesh) for b, body in enumerate(scene.bodies) if body.mesh.type == "box"]
+    vertices = [int(np.prod([n + 1 for n in spec.cells], dtype=object)) for _, spec in boxes]
+    return 3 * sum(vertices), (boxes[int(np.argmax(vertices))] if boxes else None)
+
+
+def available_memory():
+    """This node's available memory in bytes (MemAvailable of /proc/meminfo), None where the kernel does not say."""
+    try:
+        with open("/proc/meminfo") as meminfo:
+            for line in meminfo:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return None
+
+
+def check_memory(scene, comm, available=available_memory):
+    """A SceneError on every rank when the generated boxes cannot fit in some node's available memory even at the
+    measured floor (MEMORY_PER_DOF, MEMORY_PER_RANK): the kernel would kill the run minutes in, without a word
+    (a 1e6 x 1 x 1 box, 12 M dofs, went after 110 s). Collective."""
+    dofs, largest = box_dofs(scene)
+    node = comm.Split_type(MPI.COMM_TYPE_SHARED)
+    need, free = node.size * (MEMORY_PER_RANK + MEMORY_PER_DOF * dofs / comm.size), available()
+    node.Free()
+    short = [(n, f) for n, f in comm.allgather((need, free)) if f is not None and n > f]
+    if dofs and short:
+        b, spec = largest
+        n, f = max(short)
+        raise SceneError(f"bodies[{b}].mesh.cells: {list(spec.cells)} makes the generated boxes {dofs} dofs, which "
+                         f"need at least {n / 2**30:.1f} GiB on a node (about {MEMORY_PER_DOF // 1024} KiB a dof and "
+                         f"{MEMORY_PER_RANK // 2**20} MiB a rank, measured), more than its {f / 2**30:.1f} GiB "
+                         f"available: use fewer cells or more nodes")
+
+
 def build_global_mesh(scene):
     """Generate or read every body and merge them into one vertex/cell numbering (rank 0)."""
     points, cells, bodies, masks, names = [], [], [], [], []
     offset, cell_types = 0, set()
-    boxes = [(b, body.mesh) for b, body in enumerate(scene.bodies) if body.mesh.type == "box"]
-    dofs = sum(3 * int(np.prod([n + 1 for n in spec.cells], dtype=object)) for _, spec in boxes)
+    dofs, largest = box_dofs(scene)
     if dofs > np.iinfo(PETSc.IntType).max:       # before any array is made: a box can be too big to allocate
-        b, spec = max(boxes, key=lambda box: np.prod([n + 1 for n in box[1].cells], dtype=object))
+        b, spec = largest
         raise SceneError(f"bodies[{b}].mesh.cells: {list(spec.cells)} makes the generated boxes {dofs} dofs, "
                          f"more than PETSc's {np.iinfo(PETSc.IntType).bits}-bit indices can number "
                          f"({np.iinfo(PETSc.IntType).max})")
@@ -206,6 +247,7 @@ def _bcast_points(sf, root_data, n_leaf):
 def distribute_mesh(scene, comm):
     """Build, label and distribute the scene's mesh; return this rank's LocalMesh."""
     gm = on_root(comm, lambda: build_global_mesh(scene))
+    check_memory(scene, comm)
     header = comm.bcast((gm.cell_type, gm.surface_names, len(gm.points), len(gm.cells))
                         if comm.rank == 0 else None, root=0)
     cell_type, surface_names, n_vertices, n_cells = header

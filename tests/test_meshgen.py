@@ -175,3 +175,23 @@ def test_rotated_box_keeps_shape_and_face_names():
     assert turned.surfaces.keys() == plain.surfaces.keys()
     np.testing.assert_array_equal(turned.cells, plain.cells)
     np.testing.assert_allclose(rotation_matrix([0, 0, 90]) @ [1, 0, 0], [0, 1, 0], atol=1e-15)
+
+
+def test_memory_floor_refuses_a_box_no_node_can_hold():
+    """A box whose measured memory floor exceeds the node's available memory shall be a SceneError naming the
+    key before any matrix is made (the kernel killed such a run after 110 s, without a word); a node that does
+    not say how much it has is not checked."""
+    from conftest import CONFIGS
+    from mpi4py import MPI
+
+    from qsc_petsc.errors import SceneError
+    from qsc_petsc.mesh import MEMORY_PER_DOF, check_memory
+    from qsc_petsc.scene import load_scene
+    scene = load_scene(CONFIGS / "block_compression.toml", ["bodies.0.mesh.cells=[100, 100, 100]"])
+    dofs = 3 * 101**3
+    with pytest.raises(SceneError, match=rf"^bodies\[0\]\.mesh\.cells: \[100, 100, 100\] makes the generated boxes "
+                                         rf"{dofs} dofs, which need at least .* GiB on a node .* more than its 1\.0 "
+                                         rf"GiB available: use fewer cells or more nodes$"):
+        check_memory(scene, MPI.COMM_SELF, available=lambda: 2**30)
+    check_memory(scene, MPI.COMM_SELF, available=lambda: None)
+    check_memory(scene, MPI.COMM_SELF, available=lambda: 2 * MEMORY_PER_DOF * dofs)     # fits
