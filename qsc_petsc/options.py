@@ -1,5 +1,6 @@
 """PETSc start-up and the options database: scene [petsc] tables under the qsc_ prefix, command line first."""
 
+import re
 import sys
 
 PREFIX = "qsc_"
@@ -91,8 +92,6 @@ def check_tolerances():
     infinite: PETSc takes a negative tolerance as its own default without a word, and the solve then failed
     with a reason that did not name the option. A value that is no number is left to PETSc, whose message
     names it (set_from_options)."""
-    import re
-
     from .errors import SceneError
     for name, value in options_in_effect().items():
         kind = re.search(r"_(rtol|atol|stol|divtol|max_it)$", name) if name.startswith(PREFIX) else None
@@ -134,7 +133,6 @@ def set_from_options(obj, what):
 def _holders(detail):
     """The options PETSc's message is about, as ' in -name': those whose value it quotes as not a number (it names
     the value, not the option), or a type option given no value; '' if none is found."""
-    import re
     quoted = re.search(r"Input string (\S+) has no numeric value", detail)
     names = [f"-{name}" for name, value in options_in_effect().items() if quoted and value == quoted.group(1)]
     if "Unable to find requested" in detail:        # a type option given no value: PETSc quotes an empty name
