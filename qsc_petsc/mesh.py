@@ -157,34 +157,34 @@ def available_memory():
     return None
 
 
-def check_memory(scene, comm, available=available_memory):
-    """A SceneError on every rank when the generated boxes cannot fit in some node's available memory even at the
-    measured floor (MEMORY_PER_DOF, MEMORY_PER_RANK): the kernel would kill the run minutes in, without a word
-    (a 1e6 x 1 x 1 box, 12 M dofs, went after 110 s). Collective."""
+def check_size(scene, comm, available=available_memory):
+    """A SceneError on every rank, before any mesh array is made, when the generated boxes have more dofs than
+    PETSc's indices can number, or cannot fit in some node's available memory even at the measured floor
+    (MEMORY_PER_DOF, MEMORY_PER_RANK): the kernel would kill the run minutes in, without a word (a 1e6 x 1 x 1
+    box, 12 M dofs, went after 110 s). Collective."""
     dofs, largest = box_dofs(scene)
+    if not dofs:
+        return
+    b, spec = largest
+    head = f"bodies[{b}].mesh.cells: {list(spec.cells)} makes the generated boxes {dofs} dofs"
+    limit = np.iinfo(PETSc.IntType)
+    if dofs > limit.max:          # the same scene on every rank: all raise here together
+        raise SceneError(f"{head}, more than PETSc's {limit.bits}-bit indices can number ({limit.max})")
     node = comm.Split_type(MPI.COMM_TYPE_SHARED)
     need, free = node.size * (MEMORY_PER_RANK + MEMORY_PER_DOF * dofs / comm.size), available()
     node.Free()
     short = [(n, f) for n, f in comm.allgather((need, free)) if f is not None and n > f]
-    if dofs and short:
-        b, spec = largest
+    if short:
         n, f = max(short)
-        raise SceneError(f"bodies[{b}].mesh.cells: {list(spec.cells)} makes the generated boxes {dofs} dofs, which "
-                         f"need at least {n / 2**30:.1f} GiB on a node (about {MEMORY_PER_DOF // 1024} KiB a dof and "
-                         f"{MEMORY_PER_RANK // 2**20} MiB a rank, measured), more than its {f / 2**30:.1f} GiB "
-                         f"available: use fewer cells or more nodes")
+        raise SceneError(f"{head}, which need at least {n / 2**30:.1f} GiB on a node (about "
+                         f"{MEMORY_PER_DOF // 1024} KiB a dof and {MEMORY_PER_RANK // 2**20} MiB a rank, measured), "
+                         f"more than its {f / 2**30:.1f} GiB available: use fewer cells or more nodes")
 
 
 def build_global_mesh(scene):
     """Generate or read every body and merge them into one vertex/cell numbering (rank 0)."""
     points, cells, bodies, masks, names = [], [], [], [], []
     offset, cell_types = 0, set()
-    dofs, largest = box_dofs(scene)
-    if dofs > np.iinfo(PETSc.IntType).max:       # before any array is made: a box can be too big to allocate
-        b, spec = largest
-        raise SceneError(f"bodies[{b}].mesh.cells: {list(spec.cells)} makes the generated boxes {dofs} dofs, "
-                         f"more than PETSc's {np.iinfo(PETSc.IntType).bits}-bit indices can number "
-                         f"({np.iinfo(PETSc.IntType).max})")
     for b, body in enumerate(scene.bodies):
         spec = body.mesh
         if spec.type == "box":
@@ -246,8 +246,8 @@ def _bcast_points(sf, root_data, n_leaf):
 
 def distribute_mesh(scene, comm):
     """Build, label and distribute the scene's mesh; return this rank's LocalMesh."""
+    check_size(scene, comm)
     gm = on_root(comm, lambda: build_global_mesh(scene))
-    check_memory(scene, comm)
     header = comm.bcast((gm.cell_type, gm.surface_names, len(gm.points), len(gm.cells))
                         if comm.rank == 0 else None, root=0)
     cell_type, surface_names, n_vertices, n_cells = header

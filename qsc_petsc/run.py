@@ -309,11 +309,10 @@ class Run:
     def _finish(self):
         """summary.json and petsc_options.txt at the end of the run, failed or not: the options a failed run ran
         with are what its user changes next (collective)."""
-        self.summary["petsc_options"] = options.options_in_effect()
+        in_effect = self.summary["petsc_options"] = options.options_in_effect()
         self.write_summary()
         path = self.out / "petsc_options.txt"
-        write_on_root(self.comm, path, lambda: path.write_text(
-            options.options_text(options.options_in_effect(), self.from_scene)))
+        write_on_root(self.comm, path, lambda: path.write_text(options.options_text(in_effect, self.from_scene)))
 
     def _step_record(self, step, t, stats, u, ul):
         last = stats["solves"][-1]

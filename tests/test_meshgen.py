@@ -185,13 +185,13 @@ def test_memory_floor_refuses_a_box_no_node_can_hold():
     from mpi4py import MPI
 
     from qsc_petsc.errors import SceneError
-    from qsc_petsc.mesh import MEMORY_PER_DOF, check_memory
+    from qsc_petsc.mesh import MEMORY_PER_DOF, check_size
     from qsc_petsc.scene import load_scene
     scene = load_scene(CONFIGS / "block_compression.toml", ["bodies.0.mesh.cells=[100, 100, 100]"])
     dofs = 3 * 101**3
     with pytest.raises(SceneError, match=rf"^bodies\[0\]\.mesh\.cells: \[100, 100, 100\] makes the generated boxes "
                                          rf"{dofs} dofs, which need at least .* GiB on a node .* more than its 1\.0 "
                                          rf"GiB available: use fewer cells or more nodes$"):
-        check_memory(scene, MPI.COMM_SELF, available=lambda: 2**30)
-    check_memory(scene, MPI.COMM_SELF, available=lambda: None)
-    check_memory(scene, MPI.COMM_SELF, available=lambda: 2 * MEMORY_PER_DOF * dofs)     # fits
+        check_size(scene, MPI.COMM_SELF, available=lambda: 2**30)
+    check_size(scene, MPI.COMM_SELF, available=lambda: None)
+    check_size(scene, MPI.COMM_SELF, available=lambda: 2 * MEMORY_PER_DOF * dofs)     # fits
