@@ -145,16 +145,24 @@ def box_dofs(scene):
     return 3 * sum(vertices), (boxes[int(np.argmax(vertices))] if boxes else None)
 
 
-def available_memory():
-    """This node's available memory in bytes (MemAvailable of /proc/meminfo), None where the kernel does not say."""
+def available_memory(meminfo="/proc/meminfo", overcommit="/proc/sys/vm/overcommit_memory"):
+    """This node's available memory in bytes, None where the kernel does not say: MemAvailable of /proc/meminfo,
+    and no more than the commit limit leaves (CommitLimit - Committed_AS) where the kernel does not overcommit
+    (vm.overcommit_memory = 2: allocations beyond it are refused, touched or not)."""
     try:
-        with open("/proc/meminfo") as meminfo:
-            for line in meminfo:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
+        with open(meminfo) as lines:
+            info = {line.split(":")[0]: int(line.split()[1]) * 1024 for line in lines if line.split()[1:2]}
+    except (OSError, ValueError):
+        return None
+    free = info.get("MemAvailable")
+    try:
+        with open(overcommit) as mode:
+            strict = mode.read().strip() == "2"
     except OSError:
-        pass
-    return None
+        strict = False
+    if free is not None and strict and "CommitLimit" in info and "Committed_AS" in info:
+        free = min(free, max(info["CommitLimit"] - info["Committed_AS"], 0))
+    return free
 
 
 def check_size(scene, comm, available=available_memory):

@@ -17,6 +17,7 @@ from petsc4py import PETSc
 from . import assembly, options, preconditioner
 from .contact.penalty import multipliers_update, row_response
 from .errors import ConvergenceError, SceneError, petsc_detail
+from .mesh import available_memory
 
 SNES_REASONS = {v: k for k, v in vars(PETSc.SNES.ConvergedReason).items() if not k.startswith("_")}
 KSP_REASONS = {v: k for k, v in vars(PETSc.KSP.ConvergedReason).items() if not k.startswith("_")}
@@ -27,6 +28,12 @@ PETSC_ERR_MISSING_FACTOR = 92  # MatGetFactor: no package provides that factoriz
 # analysis foresaw): more memory relaxation ICNTL(14) cures it; measured on a 1.7k-dof patch test on 3 ranks
 MUMPS_WORKSPACE_ERRORS = (-8, -9, -14, -15, -17, -20)
 MUMPS_MAX_RELAXATION = 1000    # percent
+# MUMPS INFOG(1) when its factorization would take more memory than it may: over the ICNTL(23) cap (-19), or an
+# allocation the system refused (-13); with a cap set, a work array too small within it (-9) is the same want
+MUMPS_MEMORY_ERRORS = (-19, -13)
+# the part of a rank's share of its node's available memory that a MUMPS factorization may take by default
+# (ICNTL(23), System._mumps_memory_cap): the rest is for the matrix, vectors and the solve's own arrays
+MUMPS_MEMORY_SHARE = 0.9
 KSP_MAX_IT = 2000              # Krylov iterations per linear solve unless -qsc_ksp_max_it says otherwise
 START_TOUCHING, START_REACH = "touching", "reach"   # ConstraintTerm.start: an increment's first closed set
 DAMPING_HALVINGS = 8           # smallest damped Newton step 1/2^7 (System._damp)
@@ -259,6 +266,51 @@ class System:
             options.set_from_options(self.snes, "solver (-qsc_snes_*, -qsc_ksp_*, -qsc_pc_*)")
         finally:
             options.remove_options(added)
+        self.mumps_cap = self._mumps_memory_cap(available_memory)
+
+    def _mumps_memory_cap(self, available):
+        """The MB a MUMPS factorization solving the system (-qsc_pc_type lu or cholesky with MUMPS, named or PETSc's
+        own choice on several ranks) may take on each rank, its ICNTL(23): -qsc_mat_mumps_icntl_23 if set, else
+        MUMPS_MEMORY_SHARE of each rank's share of its node's available memory, the least over the nodes
+        (collective; set around each solve by _mumps_options). (cap, where it comes from) or None.
+
+        Past the cap MUMPS stops after its analysis (INFOG(1) = -19), which _more_mumps_workspace turns into an
+        error naming the memory; without it the kernel refuses the allocation or ends the run midway through
+        the factorization, without a word. MUMPS sizes its main work array within the cap but touches only what
+        the factors use (70k dofs, 2 ranks: peak memory 1.93 -> 1.99 GB with a cap of 8000 MB)."""
+        pc = self.snes.getKSP().getPC()
+        package = pc.getFactorSolverType() or ("mumps" if self.comm.size > 1 else "petsc")   # PETSc's own choice
+        if pc.getType() not in ("lu", "cholesky") or package != "mumps":
+            return None
+        own = options.option_value("mat_mumps_icntl_23")
+        if own is not None:         # the user's (PETSc itself refuses a value that is not an integer)
+            try:
+                return (int(own), "-qsc_mat_mumps_icntl_23") if int(own) > 0 else None
+            except ValueError:
+                return None
+        node = self.comm.Split_type(MPI.COMM_TYPE_SHARED)
+        free, ranks = available(), node.size
+        node.Free()
+        share = self.comm.allreduce(np.inf if free is None else free / ranks, op=MPI.MIN)
+        if not np.isfinite(share):
+            return None
+        return (max(int(MUMPS_MEMORY_SHARE * share / 1e6), 1),
+                f"{MUMPS_MEMORY_SHARE:.0%} of a rank's share of its node's available memory")
+
+    @contextmanager
+    def _mumps_options(self):
+        """The memory cap in the options database while a solve may make a MUMPS factor (it reads its options
+        then), and out of it after: a run that is not destroyed leaves no cap for the next run to take as the
+        user's."""
+        name = "qsc_mat_mumps_icntl_23"
+        ours = self.mumps_cap is not None and self.mumps_cap[1] != "-" + name
+        if ours:
+            PETSc.Options().setValue(name, self.mumps_cap[0])
+        try:
+            yield
+        finally:
+            if ours:
+                PETSc.Options().delValue(name)
 
     def set_terms(self, terms):
         """Install the constraint terms of a new search, keeping what it did not change (collective).
@@ -602,7 +654,8 @@ class System:
             for term in self.terms:
                 term.start = start
             try:
-                self.snes.solve(None, u)
+                with self._mumps_options():
+                    self.snes.solve(None, u)
             except PETSc.Error as exc:     # on every rank: the reason is collective; a failed solve like any other
                 if exc.ierr == PETSC_ERR_MISSING_FACTOR:     # met at the first factorization, on every rank
                     raise SceneError("the PETSc options ask for a factorization that no installed package "
@@ -648,6 +701,8 @@ class System:
             stats["free_motion"] = self.free_seen
         if self.mumps_relaxation is not None:
             stats["mumps_icntl_14"] = self.mumps_relaxation
+        if self.mumps_cap is not None:
+            stats["mumps_icntl_23"] = self.mumps_cap[0]
         return reason > 0, u, stats
 
     def _start_mode(self, u):
@@ -679,13 +734,29 @@ class System:
 
     def _more_mumps_workspace(self):
         """After a MUMPS factorization that ran out of workspace, double its memory relaxation ICNTL(14) for the
-        next factors (collective: INFOG is global); False if that was not the failure or it is spent."""
+        next factors (collective: INFOG is global); False if that was not the failure or it is spent. One that
+        wanted more memory than it may take (past its ICNTL(23) cap, or an allocation the kernel refused) ends
+        the solve at once with a ConvergenceError naming the memory: a smaller increment needs the same factors
+        (the 835k-dof merged two-cube body on 2 ranks, MUMPS LU: four cutbacks, each failing the same way, and
+        "KSP DIVERGED_PCSETUP_FAILED")."""
         pc = self.snes.getKSP().getPC()
         if pc.getType() not in ("lu", "cholesky") or pc.getFactorSolverType() != "mumps":
             return False
         F = pc.getFactorMatrix()
+        error = F.getMumpsInfog(1)
+        if error in MUMPS_MEMORY_ERRORS or (error in MUMPS_WORKSPACE_ERRORS and self.mumps_cap is not None):
+            cap, lift = "", ""
+            if self.mumps_cap is not None:
+                cap = f"{self.mumps_cap[0]} MB a rank ({self.mumps_cap[1]})"
+                lift = "; -qsc_mat_mumps_icntl_23 0 lifts the cap"
+            want = (f"the system refused an allocation it asked for{' within its cap of ' + cap if cap else ''}"
+                    if error == -13 else f"it needs more memory than its cap of {cap}")
+            raise ConvergenceError(
+                f"MUMPS's factorization: {want}; its estimate after the analysis was {F.getMumpsInfog(16)} MB on "
+                f"its largest rank, {F.getMumpsInfog(17)} MB in all (INFOG(1) = {error}; INFOG(16), INFOG(17)). "
+                f"Use the iterative default (no -qsc_pc_type lu) or more nodes{lift}")
         relax = 2 * max(F.getMumpsIcntl(14), 20)
-        if F.getMumpsInfog(1) not in MUMPS_WORKSPACE_ERRORS or relax > MUMPS_MAX_RELAXATION:
+        if error not in MUMPS_WORKSPACE_ERRORS or relax > MUMPS_MAX_RELAXATION:
             return False
         name = "qsc_mat_mumps_icntl_14"      # read when a factor is made; the user's own value stands
         opts = PETSc.Options()

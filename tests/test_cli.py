@@ -425,6 +425,28 @@ def test_linear_solver_error_is_a_failed_solve(tmp_path, ranks):
     assert _summary(tmp_path / "out")["status"] == "failed"
 
 
+MUMPS = ["-qsc_ksp_type", "preonly", "-qsc_pc_type", "lu", "-qsc_pc_factor_mat_solver_type", "mumps"]
+
+
+@pytest.mark.parametrize("ranks", RANKS)
+def test_mumps_over_its_memory_cap_fails_at_once(tmp_path, ranks):
+    """A MUMPS factorization that needs more than its memory cap (ICNTL(23), here the user's 1 MB) shall end the
+    run at the first factorization with one line naming the memory, MUMPS's estimate and what to do: exit 3,
+    no cutbacks (a smaller increment needs the same factors), summary.json "failed". The cap a run sets by
+    itself is tested in-process (test_newton)."""
+    mesh = 'type = "box", size = [1.0, 1.0, 1.0], cells = [8, 8, 8]'      # 2187 dofs: ~2 MB of MUMPS data
+    args = ["run", block_scene(tmp_path, mesh=mesh, extra=PRESSED), "--out", tmp_path / "out"]
+    code, out = qsc(args + MUMPS + ["-qsc_mat_mumps_icntl_23", "1"], ranks)
+    lines = own_lines(out)
+    assert code == 3, out
+    assert "Traceback" not in out and not any("cutting the increment" in line for line in lines), out
+    assert lines[-1].startswith("qsc: solve failed: load step 1: MUMPS's factorization: it needs more memory than "
+                                "its cap of 1 MB a rank (-qsc_mat_mumps_icntl_23); its estimate after the analysis "
+                                "was "), out
+    assert "(INFOG(1) = -19; INFOG(16), INFOG(17))" in lines[-1] and lines[-1].endswith("lifts the cap"), out
+    assert _summary(tmp_path / "out")["status"] == "failed"
+
+
 @pytest.mark.parametrize("ranks", RANKS)
 def test_library_error_in_the_solve_is_a_failed_solve(tmp_path, ranks):
     """An option combination hypre accepts as options but rejects at its setup (nodal coarsening with vector

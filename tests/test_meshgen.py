@@ -195,3 +195,18 @@ def test_memory_floor_refuses_a_box_no_node_can_hold():
         check_size(scene, MPI.COMM_SELF, available=lambda: 2**30)
     check_size(scene, MPI.COMM_SELF, available=lambda: None)
     check_size(scene, MPI.COMM_SELF, available=lambda: 2 * MEMORY_PER_DOF * dofs)     # fits
+
+
+@pytest.mark.parametrize("mode, expected", [("0", 8 * 2**30), ("2", 3 * 2**30), (None, 8 * 2**30)])
+def test_available_memory_within_the_commit_limit(tmp_path, mode, expected):
+    """A node's available memory is MemAvailable, and no more than the commit limit leaves where the kernel does
+    not overcommit (vm.overcommit_memory = 2); a kernel that says neither leaves it unknown."""
+    from qsc_petsc.mesh import available_memory
+    meminfo = tmp_path / "meminfo"
+    meminfo.write_text(f"MemTotal: {16 * 2**20} kB\nMemAvailable: {8 * 2**20} kB\nCommitLimit: {12 * 2**20} kB\n"
+                       f"Committed_AS: {9 * 2**20} kB\nHugePages_Total:       0\n")
+    overcommit = tmp_path / "overcommit_memory"
+    if mode is not None:
+        overcommit.write_text(mode + "\n")
+    assert available_memory(meminfo, overcommit) == expected
+    assert available_memory(tmp_path / "absent", overcommit) is None

@@ -15,6 +15,10 @@ from petsc4py import PETSc
 sys.path.insert(0, str(ROOT / "scripts"))
 import bench_contact
 
+from qsc_petsc import solver
+from qsc_petsc.errors import ConvergenceError
+from qsc_petsc.run import Run
+from qsc_petsc.scene import load_scene
 from qsc_petsc.solver import FLOOR_SPAN, KRYLOV_MARGIN, STALL_WINDOW, START_REACH, START_TOUCHING, System
 
 SMALL = ["bodies.0.mesh.cells=[3,3,3]", "bodies.1.mesh.cells=[4,4,4]"]
@@ -305,3 +309,36 @@ def test_a_try_reports_the_failure_of_its_last_solve():
     assert (first["damped_from"], first["tied_rows"]) == (4, 2)
     assert first["snes_reason"] == "AUGMENTED_LAGRANGIAN_MAX_IT"
     assert first["multipliers_unsettled"] == ("contact[1]", 1.6e-5, 1e-6)
+
+
+@pytest.mark.parametrize("free, cap", [(2e6, 1), (None, None), (4e9, 3600)])
+def test_mumps_memory_cap_from_the_available_memory(tmp_path, monkeypatch, free, cap):
+    """A run solving with MUMPS shall cap its factorization at MUMPS_MEMORY_SHARE of the rank's share of the
+    node's available memory (ICNTL(23), in MB; each solve's summary says it): with 2 MB available the
+    2187-dof block needs more and the run fails at once, naming the cap; where the kernel does not say what
+    is available, no cap. The cap is in the options database only while a solve runs. A run without MUMPS
+    sets none."""
+    monkeypatch.setattr(solver, "available_memory", lambda: free)
+    scene = tmp_path / "block.toml"
+    scene.write_text(
+        'name = "block"\n[[bodies]]\nname = "blk"\n'
+        'mesh = { type = "box", size = [1.0, 1.0, 1.0], cells = [8, 8, 8] }\n'
+        'material = { youngs_modulus = 1000.0 }\n'
+        '[[boundary]]\nsurface = "blk.zmin"\ntype = "displacement"\nux = 0.0\nuy = 0.0\nuz = 0.0\n'
+        '[[boundary]]\nsurface = "blk.zmax"\ntype = "pressure"\nvalue = 1.0\n'
+        '[petsc]\nksp_type = "preonly"\npc = { type = "lu", factor_mat_solver_type = "mumps" }\n')
+    run = Run(load_scene(scene), MPI.COMM_WORLD, tmp_path / "out", log=lambda *a, **k: None)
+    try:
+        if cap == 1:
+            with pytest.raises(ConvergenceError, match=r"it needs more memory than its cap of 1 MB a rank "
+                                                       r"\(90% of a rank's share of its node's available memory\)"):
+                run.execute()
+            assert run.summary["status"] == "failed"
+        else:
+            summary = run.execute()
+            assert [s.get("mumps_icntl_23") for s in _solves(summary)] == [cap]
+        assert not PETSc.Options().hasName("qsc_mat_mumps_icntl_23")
+    finally:
+        run.destroy()
+    _, summary = run_scene(CONFIGS / "block_compression.toml", tmp_path / "default")
+    assert all("mumps_icntl_23" not in s for s in _solves(summary))
