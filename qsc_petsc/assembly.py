@@ -74,14 +74,15 @@ def _stiffness_operator(size, csr, comm):
 BATCH = 1 << 19           # candidates (element blocks) summed per batch: ~40 MB of temporaries
 
 
-def stiffness_matrix(mesh, lmbda, mu):
+def stiffness_matrix(mesh, lmbda, mu, extra=None):
     """The elastic stiffness K: a dof-space MPIAIJ matrix (block size 3) whose CSR arrays are built here.
 
     Rows are vertices (sparsity.py). Each rank sums its cells' element blocks into the rows it
     owns, sends the blocks of rows owned elsewhere to their owners, and hands PETSc its rows as
     split (diagonal | off-diagonal) CSR arrays, which PETSc uses without copying. The pattern is
     exact: no new nonzero may be added later. Element kernels run once per group of congruent
-    cells (elasticity.congruent_groups) and batch of rows. lmbda, mu: (local cells,) [Pa]."""
+    cells (elasticity.congruent_groups) and batch of rows. lmbda, mu: (local cells,) [Pa]. extra: None or
+    (rows, cols, bits) as lattice_stiffness_matrix takes it: the blocks are held whole."""
     comm = mesh.comm
     v0, v1 = mesh.vertex_range
     order = np.argsort(mesh.gvert, kind="stable")            # rows in global order: owned ones are one run
@@ -98,6 +99,8 @@ def stiffness_matrix(mesh, lmbda, mu):
     starts = ownership_starts(comm, o1 - o0)
     # the owners of ghost rows reserve those blocks: they may hold columns no local cell has
     x_row, x_col = send_to_owners(comm, starts, ghost_row, ghost_col)
+    if extra is not None:          # whole blocks: this pattern is one of blocks
+        x_row, x_col = (np.concatenate([x, np.asarray(e, x.dtype)]) for x, e in zip((x_row, x_col), extra[:2]))
     colspace = np.union1d(gsorted, x_col)
     cell_cols = np.searchsorted(colspace, gsorted).astype(cell_rows.dtype)[cell_rows]
     x_order = np.argsort(x_row, kind="stable")
@@ -130,7 +133,7 @@ def stiffness_matrix(mesh, lmbda, mu):
     return _stiffness_operator(size, csr, comm)
 
 
-def lattice_stiffness_matrix(mesh, lattices):
+def lattice_stiffness_matrix(mesh, lattices, extra=None):
     """The elastic stiffness K of a mesh made only of generated hex boxes, read from row templates
     (lattice.py): the same matrix as stiffness_matrix up to round-off, without summing element blocks.
 
@@ -139,46 +142,116 @@ def lattice_stiffness_matrix(mesh, lattices):
     ordering (original vertex id -> PETSc vertex number). A row whose neighbours are all owned
     and numbered in lattice order (distribute_mesh numbers owned vertices in original order: most
     rows) is its template as it stands, and runs of such rows with one template are written as
-    one broadcast; the other rows are gathered block by block."""
+    one broadcast; the other rows are gathered block by block.
+
+    extra: None or (rows, cols, bits): entries to hold in the pattern with value 0, e.g. a contact stencil,
+    by 3x3 block (global vertex numbers, rows owned here) and which of the block's entries (bit 3 i + k:
+    row i, column k; a flat contact's rows couple only the normal components)."""
     comm = mesh.comm
     v0, v1 = mesh.vertex_range
     T, P, tid, gcol = _box_rows(mesh, lattices)
     n = len(tid)
     valid = P[tid]
     # one sort per row orders the blocks as PETSc's split CSR wants them: diagonal part, off-diagonal
-    # part, absent ones last, each by column; the offset index rides in the low bits
+    # part, absent ones last, each by column; the block's offset index in the low bits
     part = np.where(~valid, 2, np.where((gcol >= v0) & (gcol < v1), 0, 1))
-    key = (part << 58) | (gcol << 5) | np.arange(27)
+    key = (part << _PART_SHIFT) | (gcol << _IDX_BITS) | np.arange(27)
     key.sort(axis=1)
-    d, part, gcol = key & 31, key >> 58, (key >> 5) & ((1 << 53) - 1)
-    n_diag, n_off = (part == 0).sum(axis=1), (part == 1).sum(axis=1)
-    natural = (n_off == 0) & ((d[:, 1:] > d[:, :-1]) | (part[:, 1:] == 2)).all(axis=1)
-    rowptr_d, rowptr_o = (np.concatenate([[0], np.cumsum(c)]) for c in (n_diag, n_off))
-    vals_d, cols_d = np.empty(9 * rowptr_d[-1]), np.empty(9 * rowptr_d[-1], PETSc.IntType)
+    d, part, gcol = _unkey(key)
+    # entries per point row (3 per vertex row) in the diagonal and off-diagonal parts
+    count = [np.repeat(3 * (part == p).sum(axis=1), 3).reshape(n, 3) for p in (0, 1)]
+    natural = (count[1][:, 0] == 0) & ((d[:, 1:] > d[:, :-1]) | (part[:, 1:] == 2)).all(axis=1)
+    widened = np.zeros(n, bool)
+    if extra is not None and len(extra[0]):
+        widened[np.asarray(extra[0], np.int64) - v0] = True
+        natural &= ~widened
     runs = sparsity.equal_runs(tid, natural)
+    odd = np.flatnonzero(~sparsity.covered(runs, n))
+    # the other rows, the widened ones with their extra blocks: (rows, offset index, part, global column, entry
+    # mask (bit 3 i + k) of each of their blocks)
+    plain = odd[~widened[odd]]
+    groups = [(plain, d[plain], part[plain], gcol[plain], None)]
+    if widened.any():
+        wide = np.flatnonzero(widened)
+        groups.append((wide, *_widen_rows(key[wide], wide + v0, extra, v0, v1)))
+    masks = {}
+    for rows, od, opart, ocol, bits in groups:
+        for p in (0, 1):
+            sel = np.broadcast_to((opart == p)[:, None, :, None], (len(rows), 3, od.shape[1], 3))
+            if bits is not None:
+                sel = sel & (((bits[:, None, :, None] >> (3 * np.arange(3)[:, None, None] + np.arange(3))) & 1) > 0)
+                count[p][rows] = sel.sum(axis=(2, 3))
+            masks[id(rows), p] = sel
+    ptr = [np.concatenate([[0], np.cumsum(c.ravel())]) for c in count]     # point-row pointers
+    vals_d, cols_d = np.empty(ptr[0][-1]), np.empty(ptr[0][-1], PETSc.IntType)
+    vals_o, cols_o = np.empty(ptr[1][-1]), np.empty(ptr[1][-1], PETSc.IntType)
     trip = np.arange(3, dtype=PETSc.IntType)
     present = [T[t][:, P[t]].ravel() for t in range(len(T))]      # a natural row's values: its template's blocks
     for a, b in runs:
-        nb, p0, p1 = n_diag[a], 9 * rowptr_d[a], 9 * rowptr_d[b]
+        nb, p0, p1 = count[0][a, 0] // 3, ptr[0][3 * a], ptr[0][3 * b]
         vals_d[p0:p1].reshape(b - a, -1)[:] = present[tid[a]]
         cols_d[p0:p1].reshape(b - a, 3, nb, 3)[:] = (3 * (gcol[a:b, :nb] - v0))[:, None, :, None] + trip
-    odd = np.flatnonzero(~sparsity.covered(runs, n))
-    sel = (part[odd] == 0)[:, None, :]
-    blocks = T[tid[odd, None, None], np.arange(3)[:, None], d[odd, None, :]]     # (rows, 3, 27, 3)
-    col0 = np.where(part[odd] == 0, 3 * (gcol[odd] - v0), 3 * gcol[odd]).astype(PETSc.IntType)[:, None, :, None] + trip
-    col0 = np.broadcast_to(col0, blocks.shape)
-    lens = 9 * n_diag[odd]
-    at = np.repeat(9 * rowptr_d[odd] - np.cumsum(lens) + lens, lens) + np.arange(lens.sum())
-    vals_d[at] = blocks[np.broadcast_to(sel[..., None], blocks.shape)]
-    cols_d[at] = col0[np.broadcast_to(sel[..., None], blocks.shape)]
-    di = sparsity.point_rowptr(rowptr_d, n_diag).astype(PETSc.IntType)
-    csr = (di, cols_d, vals_d)
+    for rows, od, opart, ocol, _ in groups:
+        blocks = T[tid[rows, None, None], np.arange(3)[:, None], np.minimum(od, 26)[:, None, :]]    # (rows, 3, w, 3)
+        if od.shape[1] > 27:
+            blocks[np.broadcast_to(od[:, None, :, None] >= 27, blocks.shape)] = 0.0      # extra blocks hold 0
+        col0 = np.where(opart == 0, 3 * (ocol - v0), 3 * ocol).astype(PETSc.IntType)[:, None, :, None] + trip
+        col0 = np.broadcast_to(col0, blocks.shape)
+        for p, vals, cols in ((0, vals_d, cols_d), (1, vals_o, cols_o)):
+            lens = count[p][rows].ravel()
+            starts = ptr[p][(3 * rows[:, None] + np.arange(3)).ravel()]
+            at = np.repeat(starts - np.cumsum(lens) + lens, lens) + np.arange(lens.sum())
+            sel = masks[id(rows), p]
+            vals[at], cols[at] = blocks[sel], col0[sel]
+    csr = (ptr[0].astype(PETSc.IntType), cols_d, vals_d)
     if comm.size > 1:
-        off = np.broadcast_to((part[odd] == 1)[:, None, :, None], blocks.shape)
-        oi = sparsity.point_rowptr(rowptr_o, n_off).astype(PETSc.IntType)
-        csr = (csr, (oi, col0[off], blocks[off]))
+        csr = (csr, (ptr[1].astype(PETSc.IntType), cols_o, vals_o))
     size = ((3 * n, 3 * mesh.n_vertices), (3 * n, 3 * mesh.n_vertices))
     return _stiffness_operator(size, csr, comm)
+
+
+# lattice_stiffness_matrix's sort keys: part (0 diagonal, 1 off-diagonal, 2 absent) | global column | offset index
+_IDX_BITS, _PART_SHIFT = 5, 60
+
+
+def _unkey(key, idx_bits=_IDX_BITS):
+    """(offset index, part, global column) of lattice_stiffness_matrix's sort keys."""
+    return key & ((1 << idx_bits) - 1), key >> _PART_SHIFT, (key >> idx_bits) & ((1 << (_PART_SHIFT - idx_bits)) - 1)
+
+
+def _widen_rows(key, rows, extra, v0, v1):
+    """The sorted blocks of rows (global vertex numbers; key: their 27 sorted template keys) with the extra
+    blocks (rows, cols, bits) of lattice_stiffness_matrix added as offset indices 27, 28, ...: (offset index,
+    part, global column, entry mask), each (len(rows), width); a template block's mask is all nine entries.
+    An extra block the template has already is not added again."""
+    er, ec, eb = (np.asarray(a, np.int64) for a in extra)
+    order = np.lexsort((ec, er))
+    er, ec, eb = er[order], ec[order], eb[order]
+    first = np.r_[True, (er[1:] != er[:-1]) | (ec[1:] != ec[:-1])]          # one block per (row, column)
+    starts = np.flatnonzero(first)
+    er, ec, eb = er[starts], ec[starts], np.bitwise_or.reduceat(eb, starts) if len(eb) else eb
+    pos = np.searchsorted(rows, er)
+    keep = (pos < len(rows)) & (rows[np.minimum(pos, len(rows) - 1)] == er)
+    pos, cols, eb = pos[keep], ec[keep], eb[keep]
+    count = np.bincount(pos, minlength=len(rows))
+    width = int(count.max(initial=0))
+    bits = max(_IDX_BITS, (27 + width).bit_length())         # room for the offset indices of the widest row
+    d, part, gcol = _unkey(key)
+    rank = np.arange(len(pos)) - np.repeat(np.cumsum(count) - count, count)   # blocks are sorted by row
+    wide = np.empty((len(rows), 27 + width), np.int64)
+    wide[:, :27] = (part << _PART_SHIFT) | (gcol << bits) | d
+    wide[:, 27:] = (2 << _PART_SHIFT) | (27 + np.arange(width))          # absent unless filled below
+    mask = np.zeros(wide.shape, np.int64)
+    mask[:, :27] = 0x1FF
+    part = np.where((cols >= v0) & (cols < v1), 0, 1)
+    wide[pos, 27 + rank] = (part << _PART_SHIFT) | (cols << bits) | (27 + rank)
+    mask[pos, 27 + rank] = eb
+    order = np.argsort(wide, axis=1)
+    wide, mask = np.take_along_axis(wide, order, axis=1), np.take_along_axis(mask, order, axis=1)
+    same = np.zeros(wide.shape, bool)                 # an extra block the template has: it sorts after it
+    same[:, 1:] = ((wide[:, 1:] >> bits) == (wide[:, :-1] >> bits)) & ((wide[:, 1:] >> _PART_SHIFT) < 2)
+    wide[same] = (2 << _PART_SHIFT) | (wide[same] & ((1 << _PART_SHIFT) - 1))
+    return (*_unkey(wide, bits), mask)
 
 
 def _box_rows(mesh, lattices):

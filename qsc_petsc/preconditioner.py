@@ -80,13 +80,15 @@ def band_dofs(K, couplings, layers=1):
     template = K.createVecRight()
     band = _owned_marked(template, np.union1d(np.flatnonzero(touched) + r0,
                                               np.concatenate(partners) if partners else []))
-    if layers > 0:
-        ia, ja, _ = K.getValuesCSR()
-        for _ in range(layers):
-            loc = band - r0
-            counts = ia[loc + 1] - ia[loc]
-            idx = np.repeat(ia[loc], counts) + (np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts))
-            band = _owned_marked(template, np.union1d(band, ja[idx]))
+    columns = PETSc.IS().createStride(r1 - r0, r0, 1, comm=K.getComm())
+    for _ in range(layers):
+        # the band's rows of K alone: a copy of all of K's pattern (getValuesCSR) took fresh memory of K's size
+        rows = PETSc.IS().createGeneral(np.asarray(band, dtype=PETSc.IntType), comm=K.getComm())
+        sub = K.createSubMatrix(rows, columns)
+        band = _owned_marked(template, np.union1d(band, sub.getValuesCSR()[1]))
+        sub.destroy()
+        rows.destroy()
+    columns.destroy()
     template.destroy()
     return np.asarray(band, dtype=PETSc.IntType)
 

@@ -134,18 +134,25 @@ class Run:
         _LIVE_RUNS[:] = [ref for ref in _LIVE_RUNS if ref() is not None] + [weakref.ref(self)]
 
     def _build(self, scene, comm):
-        """Mesh, operators, solver, contact model and output writer, in that order."""
+        """Mesh, contact model and its first search, operators, solver and output writer, in that order."""
         options.check_tolerances()
         with self.phases("mesh"):
             self.mesh = distribute_mesh(scene, comm)
         mesh = self.mesh
+        self.contact, extra, stencils = None, None, []
+        if scene.contact or scene.die:
+            from .contact.model import ContactModel
+            layout = PETSc.Vec().createMPI((3 * int(mesh.owned.sum()), 3 * mesh.n_vertices), bsize=3, comm=comm)
+            self.contact = ContactModel(mesh, scene, layout, self.phases)
+            # the first increment's search comes first: K's pattern holds its contact stencil (set_terms)
+            extra, stencils = self.contact.prepare(1.0 / scene.load.steps)
         with self.phases("assembly"):
             self.lmbda, self.mu = assembly.cell_materials(mesh, scene)
             # generated hex boxes read their rows from stencil templates; other meshes sum element blocks
             lattices = lattice.box_lattices(scene)
             self.stiffness_path = "box stencils" if lattices else "element blocks"
-            K = (assembly.lattice_stiffness_matrix(mesh, lattices) if lattices
-                 else assembly.stiffness_matrix(mesh, self.lmbda, self.mu))
+            K = (assembly.lattice_stiffness_matrix(mesh, lattices, extra) if lattices
+                 else assembly.stiffness_matrix(mesh, self.lmbda, self.mu, extra))
             u = K.createVecRight()
             self.f_ext = assembly.surface_load(mesh, scene, u)
             self.bc_dofs, bc_values, self.bc_per_boundary = assembly.dirichlet_dofs(mesh, scene)
@@ -161,14 +168,10 @@ class Run:
                                  f"pc_type is {preconditioner.amg_type()!r}")
             self.system = System(K, self.f_ext, self.bc_dofs, bc_values, nullspace, comm,
                                  scene.solver.max_active_set_iterations, scene.solver.contact_preconditioner,
-                                 scene.solver.contact_band_layers, slip, soft)
+                                 scene.solver.contact_band_layers, slip, soft, stencils)
             self.n_constrained = comm.allreduce(len(self.bc_dofs), op=MPI.SUM)
             self.restraint = Restraint(mesh, self.bc_dofs, u)
             self.system.free_motions = lambda terms, active: describe(self.restraint.free(terms, active))
-        self.contact = None
-        if scene.contact or scene.die:
-            from .contact.model import ContactModel
-            self.contact = ContactModel(mesh, scene, u, self.phases)
         self.writer = ResultWriter(mesh, self.out, scene.output.xdmf)
         path = self.out / "scene.resolved.toml"
         write_on_root(comm, path, lambda: path.write_text(scene.to_toml()))

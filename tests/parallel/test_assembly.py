@@ -2,6 +2,8 @@
 
 Runs serially in the suite and again under mpirun -n 2 and -n 3; assertions use all-reduced values."""
 
+import itertools
+
 import numpy as np
 import pytest
 from conftest import CONFIGS, all_close
@@ -114,6 +116,52 @@ def test_box_stencils_equal_dense_assembly(comm, case):
     assert comm.allreduce(int(A.getValuesCSR()[0][-1]), op=MPI.SUM) == 9 * vertex_pairs(mesh)
     assert A.getBlockSize() == 3
     A.destroy()
+
+
+def _pattern_rows(A):
+    """This rank's rows of A's pattern: a list of sets of global columns."""
+    indptr, cols, _ = A.getValuesCSR()
+    return [set(cols[a:b].tolist()) for a, b in itertools.pairwise(indptr)]
+
+
+EXTRA_CASES = {**{f"box stencils, {k}": (v[0], v[1], True) for k, v in LATTICE_CASES.items()},
+               **{f"element blocks, {k}": (v[0], v[1], False) for k, v in CASES.items() if not v[2]}}
+
+
+@pytest.mark.parametrize("case", EXTRA_CASES)
+def test_extra_blocks_widen_the_pattern_with_zeros(comm, case):
+    """Extra entries (a contact stencil's, by 3x3 block) shall widen K's pattern by exactly those entries (the box
+    stencils) or their whole blocks (the element blocks), with value 0, on any number of ranks: blocks K has
+    already, blocks to other ranks' vertices, several to one row (up to 40), and none on some rank."""
+    scene_file, sets, stencils = EXTRA_CASES[case]
+    scene = load_scene(CONFIGS / scene_file, sets)
+    mesh = distribute_mesh(scene, comm)
+    v0, v1 = mesh.vertex_range
+    rng = np.random.default_rng(7 + comm.rank)
+    rows = rng.integers(v0, v1, size=4 * (v1 - v0) // 3) if v1 > v0 else np.zeros(0, np.int64)
+    cols = rng.integers(0, mesh.n_vertices, size=len(rows))
+    rows, cols = np.r_[rows, rows[:3]], np.r_[cols, rows[:3]]          # a block every row has: its own
+    wide = np.arange(min(40, mesh.n_vertices))                        # a row wider than its 27 neighbours
+    rows, cols = np.r_[rows, np.full(len(wide) if v1 > v0 else 0, v0)], np.r_[cols, wide[:len(wide) * (v1 > v0)]]
+    bits = rng.integers(1, 512, size=len(rows))                       # which entries of each block
+    bits[-len(wide) - 3:] = 1 << 8                                   # the zz entry alone, as a flat contact's
+    extra = (rows, cols, bits)
+    if stencils:
+        lattices = lattice.box_lattices(scene)
+        A, B = (assembly.lattice_stiffness_matrix(mesh, lattices, e) for e in (None, extra))
+    else:
+        materials = assembly.cell_materials(mesh, scene)
+        A, B = (assembly.stiffness_matrix(mesh, *materials, extra=e) for e in (None, extra))
+    n = 3 * mesh.n_vertices
+    assert all_close(comm, np.array_equal(owned_dense(A, n)[0], owned_dense(B, n)[0]))
+    r0 = A.getOwnershipRange()[0]
+    expected = _pattern_rows(A)
+    for r, c, b in zip(rows, cols, bits):
+        for i in range(3):       # the box stencils hold the entries asked for, the element blocks whole blocks
+            expected[3 * r + i - r0].update(3 * c + k for k in range(3) if not stencils or b >> (3 * i + k) & 1)
+    assert all_close(comm, _pattern_rows(B) == expected)
+    A.destroy()
+    B.destroy()
 
 
 @pytest.mark.parametrize("scene_file, sets", [
