@@ -174,14 +174,15 @@ def lattice_stiffness_matrix(mesh, lattices, extra=None):
     if widened.any():
         wide = np.flatnonzero(widened)
         groups.append((wide, *_widen_rows(key[wide], wide + v0, extra, v0, v1)))
-    masks = {}
+    masks = []                  # per group and part: which of its (rows, 3, w, 3) entries it holds
     for rows, od, opart, ocol, bits in groups:
+        masks.append([])
         for p in (0, 1):
             sel = np.broadcast_to((opart == p)[:, None, :, None], (len(rows), 3, od.shape[1], 3))
             if bits is not None:
                 sel = sel & (((bits[:, None, :, None] >> (3 * np.arange(3)[:, None, None] + np.arange(3))) & 1) > 0)
                 count[p][rows] = sel.sum(axis=(2, 3))
-            masks[id(rows), p] = sel
+            masks[-1].append(sel)
     ptr = [np.concatenate([[0], np.cumsum(c.ravel())]) for c in count]     # point-row pointers
     vals_d, cols_d = np.empty(ptr[0][-1]), np.empty(ptr[0][-1], PETSc.IntType)
     vals_o, cols_o = np.empty(ptr[1][-1]), np.empty(ptr[1][-1], PETSc.IntType)
@@ -191,7 +192,7 @@ def lattice_stiffness_matrix(mesh, lattices, extra=None):
         nb, p0, p1 = count[0][a, 0] // 3, ptr[0][3 * a], ptr[0][3 * b]
         vals_d[p0:p1].reshape(b - a, -1)[:] = present[tid[a]]
         cols_d[p0:p1].reshape(b - a, 3, nb, 3)[:] = (3 * (gcol[a:b, :nb] - v0))[:, None, :, None] + trip
-    for rows, od, opart, ocol, _ in groups:
+    for (rows, od, opart, ocol, _), sels in zip(groups, masks):
         blocks = T[tid[rows, None, None], np.arange(3)[:, None], np.minimum(od, 26)[:, None, :]]    # (rows, 3, w, 3)
         if od.shape[1] > 27:
             blocks[np.broadcast_to(od[:, None, :, None] >= 27, blocks.shape)] = 0.0      # extra blocks hold 0
@@ -201,8 +202,7 @@ def lattice_stiffness_matrix(mesh, lattices, extra=None):
             lens = count[p][rows].ravel()
             starts = ptr[p][(3 * rows[:, None] + np.arange(3)).ravel()]
             at = np.repeat(starts - np.cumsum(lens) + lens, lens) + np.arange(lens.sum())
-            sel = masks[id(rows), p]
-            vals[at], cols[at] = blocks[sel], col0[sel]
+            vals[at], cols[at] = blocks[sels[p]], col0[sels[p]]
     csr = (ptr[0].astype(PETSc.IntType), cols_d, vals_d)
     if comm.size > 1:
         csr = (csr, (ptr[1].astype(PETSc.IntType), cols_o, vals_o))

@@ -86,6 +86,12 @@ class LocalMesh:
             self._surface_vertices[name] = np.sort(np.asarray(pts, dtype=np.int64) - v0)
         return self._surface_vertices[name]
 
+    def dof_vector(self):
+        """A zeroed dof-space global Vec: 3 dofs per owned vertex, block size 3, the layout of K's rows (collective)."""
+        vec = PETSc.Vec().createMPI((3 * int(self.owned.sum()), 3 * self.n_vertices), bsize=3, comm=self.comm)
+        vec.set(0.0)
+        return vec
+
     def local_vectors(self, vec):
         """Ghosted local values (nv, 3) of a dof-space global Vec, by local vertex."""
         local = self.dm.createLocalVec()
@@ -165,6 +171,14 @@ def available_memory(meminfo="/proc/meminfo", overcommit="/proc/sys/vm/overcommi
     return free
 
 
+def node_memory(comm, available=available_memory):
+    """(ranks of comm on this rank's node, the node's available memory in bytes or None) (collective)."""
+    node = comm.Split_type(MPI.COMM_TYPE_SHARED)
+    ranks = node.size
+    node.Free()
+    return ranks, available()
+
+
 def check_size(scene, comm, available=available_memory):
     """A SceneError on every rank, before any mesh array is made, when the generated boxes have more dofs than
     PETSc's indices can number, or cannot fit in some node's available memory even at the measured floor
@@ -178,9 +192,8 @@ def check_size(scene, comm, available=available_memory):
     limit = np.iinfo(PETSc.IntType)
     if dofs > limit.max:          # the same scene on every rank: all raise here together
         raise SceneError(f"{head}, more than PETSc's {limit.bits}-bit indices can number ({limit.max})")
-    node = comm.Split_type(MPI.COMM_TYPE_SHARED)
-    need, free = node.size * (MEMORY_PER_RANK + MEMORY_PER_DOF * dofs / comm.size), available()
-    node.Free()
+    ranks, free = node_memory(comm, available)
+    need = ranks * (MEMORY_PER_RANK + MEMORY_PER_DOF * dofs / comm.size)
     short = [(n, f) for n, f in comm.allgather((need, free)) if f is not None and n > f]
     if short:
         n, f = max(short)

@@ -142,8 +142,7 @@ class Run:
         self.contact, extra, stencils = None, None, []
         if scene.contact or scene.die:
             from .contact.model import ContactModel
-            layout = PETSc.Vec().createMPI((3 * int(mesh.owned.sum()), 3 * mesh.n_vertices), bsize=3, comm=comm)
-            self.contact = ContactModel(mesh, scene, layout, self.phases)
+            self.contact = ContactModel(mesh, scene, mesh.dof_vector(), self.phases)
             # the first increment's search comes first: K's pattern holds its contact stencil (set_terms)
             extra, stencils = self.contact.prepare(1.0 / scene.load.steps)
         with self.phases("assembly"):

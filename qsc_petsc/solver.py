@@ -17,7 +17,7 @@ from petsc4py import PETSc
 from . import assembly, options, preconditioner
 from .contact.penalty import multipliers_update, row_response
 from .errors import ConvergenceError, SceneError, petsc_detail
-from .mesh import available_memory
+from .mesh import available_memory, node_memory
 
 SNES_REASONS = {v: k for k, v in vars(PETSc.SNES.ConvergedReason).items() if not k.startswith("_")}
 KSP_REASONS = {v: k for k, v in vars(PETSc.KSP.ConvergedReason).items() if not k.startswith("_")}
@@ -282,9 +282,7 @@ class System:
         error naming the memory; without it the kernel refuses the allocation or ends the run midway through
         the factorization, without a word. MUMPS sizes its main work array within the cap but touches only what
         the factors use (70k dofs, 2 ranks: peak memory 1.93 -> 1.99 GB with a cap of 8000 MB)."""
-        pc = self.snes.getKSP().getPC()
-        package = pc.getFactorSolverType() or ("mumps" if self.comm.size > 1 else "petsc")   # PETSc's own choice
-        if pc.getType() not in ("lu", "cholesky") or package != "mumps":
+        if not self._factors_with_mumps():
             return None
         own = options.option_value("mat_mumps_icntl_23")
         if own is not None:         # the user's (PETSc itself refuses a value that is not an integer)
@@ -292,14 +290,19 @@ class System:
                 return (int(own), "-qsc_mat_mumps_icntl_23") if int(own) > 0 else None
             except ValueError:
                 return None
-        node = self.comm.Split_type(MPI.COMM_TYPE_SHARED)
-        free, ranks = available(), node.size
-        node.Free()
+        ranks, free = node_memory(self.comm, available)
         share = self.comm.allreduce(np.inf if free is None else free / ranks, op=MPI.MIN)
         if not np.isfinite(share):
             return None
         return (max(int(MUMPS_MEMORY_SHARE * share / 1e6), 1),
                 f"{MUMPS_MEMORY_SHARE:.0%} of a rank's share of its node's available memory")
+
+    def _factors_with_mumps(self):
+        """Whether the solver's PC is an LU or Cholesky factorization by MUMPS, named or PETSc's own choice (MUMPS on
+        several ranks, PETSc's own on one)."""
+        pc = self.snes.getKSP().getPC()
+        package = pc.getFactorSolverType() or ("mumps" if self.comm.size > 1 else "petsc")
+        return pc.getType() in ("lu", "cholesky") and package == "mumps"
 
     @contextmanager
     def _mumps_options(self):
@@ -751,9 +754,9 @@ class System:
         the solve at once with a ConvergenceError naming the memory: a smaller increment needs the same factors
         (the 835k-dof merged two-cube body on 2 ranks, MUMPS LU: four cutbacks, each failing the same way, and
         "KSP DIVERGED_PCSETUP_FAILED")."""
-        pc = self.snes.getKSP().getPC()
-        if pc.getType() not in ("lu", "cholesky") or pc.getFactorSolverType() != "mumps":
+        if not self._factors_with_mumps():
             return False
+        pc = self.snes.getKSP().getPC()
         F = pc.getFactorMatrix()
         error = F.getMumpsInfog(1)
         if error in MUMPS_MEMORY_ERRORS or (error in MUMPS_WORKSPACE_ERRORS and self.mumps_cap is not None):

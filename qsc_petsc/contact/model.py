@@ -596,8 +596,7 @@ def contact_plan(mesh, scene):
     """Lines for `qsc check`: what each contact pair and die will model (rows at the start)."""
     if not (scene.contact or scene.die):
         return ["contact: none (no contact search)"]
-    template = PETSc.Vec().createMPI((3 * int(mesh.owned.sum()), 3 * mesh.n_vertices), comm=mesh.comm)
-    template.set(0.0)
+    template = mesh.dof_vector()
     model = ContactModel(mesh, scene, template)
     terms = model.terms(template, 0.0)
     lines = []
