@@ -55,37 +55,48 @@ COARSE_CUTOFF = 1e-12      # eigenvalues of Z^T J Z below this fraction of its l
 RUN_GAP = 4096             # the slip correction's dense slices bridge gaps of up to this many dofs
 
 
+def _distinct(dofs, r0, r1):
+    """The distinct entries of dofs (global numbers): those in [r0, r1) through a mask of that range, the others
+    (a few: partners on other ranks) by a sort."""
+    dofs = np.asarray(dofs, dtype=np.int64)
+    inside = (dofs >= r0) & (dofs < r1)
+    seen = np.zeros(r1 - r0, dtype=bool)
+    seen[dofs[inside] - r0] = True
+    return np.concatenate([np.flatnonzero(seen) + r0, np.unique(dofs[~inside])])
+
+
 def _owned_marked(template, dofs):
     """The owned dofs (global, sorted) that any rank lists in `dofs` (collective)."""
+    r0, r1 = template.getOwnershipRange()
+    dofs = _distinct(dofs, r0, r1)
     mark = template.duplicate()
     mark.set(0.0)
-    mark.setValues(np.asarray(dofs, dtype=PETSc.IntType), np.ones(len(dofs)))
+    mark.setValues(dofs.astype(PETSc.IntType), np.ones(len(dofs)))
     mark.assemble()
-    owned = np.flatnonzero(mark.getArray() > 0) + mark.getOwnershipRange()[0]
+    owned = np.flatnonzero(mark.getArray() > 0) + r0
     mark.destroy()
     return owned
 
 
-def band_dofs(K, couplings, layers=1):
-    """This rank's owned dofs (global, sorted) of the contact band: every row the contact couplings (Mats
-    with K's row layout, e.g. G^T G) touch and its coupling partners, grown by `layers` rings of K's
-    sparsity; each dof is listed once, by its owner, whichever rank found it (collective)."""
+def band_dofs(K, patterns, layers=1):
+    """This rank's owned dofs (global, sorted) of the contact band: every row the contact couplings touch (their
+    patterns, this rank's rows of Mats with K's row layout, e.g. G^T G: local row pointers and global columns)
+    and its coupling partners, grown by `layers` rings of K's sparsity; each dof is listed once, by its owner,
+    whichever rank found it (collective)."""
     r0, r1 = K.getOwnershipRange()
     touched = np.zeros(r1 - r0, dtype=bool)
     partners = []
-    for C in couplings:
-        ia, ja, _ = C.getValuesCSR()
+    for ia, ja in patterns:
         touched |= np.diff(ia) > 1          # a row coupled to more than itself
         partners.append(ja)                 # its partners may live on other ranks
     template = K.createVecRight()
-    band = _owned_marked(template, np.union1d(np.flatnonzero(touched) + r0,
-                                              np.concatenate(partners) if partners else []))
+    band = _owned_marked(template, np.concatenate([np.flatnonzero(touched) + r0, *partners]))
     columns = PETSc.IS().createStride(r1 - r0, r0, 1, comm=K.getComm())
     for _ in range(layers):
         # the band's rows of K alone: a copy of all of K's pattern (getValuesCSR) took fresh memory of K's size
         rows = PETSc.IS().createGeneral(np.asarray(band, dtype=PETSc.IntType), comm=K.getComm())
         sub = K.createSubMatrix(rows, columns)
-        band = _owned_marked(template, np.union1d(band, sub.getValuesCSR()[1]))
+        band = _owned_marked(template, np.concatenate([band, sub.getValuesCSR()[1]]))
         sub.destroy()
         rows.destroy()
     columns.destroy()

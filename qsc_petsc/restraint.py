@@ -9,8 +9,11 @@ row r, (G_r v) / W_r (the row's weighted normal velocity, dimensionless), a moti
 iff B v = 0; the null space of the Gram matrix B^T B (6 per body, all-reduced) names them.
 """
 
+import weakref
+
 import numpy as np
 from mpi4py import MPI
+from petsc4py import PETSc
 
 MODES = ("translation x", "translation y", "translation z", "rotation about x", "rotation about y",
          "rotation about z")
@@ -74,7 +77,7 @@ class Restraint:
         for b in range(nb):
             body_of[mesh.body_mask(b)] = b
         # (owned dofs, 6 nb) columns: each body's six motions, zero elsewhere
-        self.R = np.zeros((3 * len(owned), 6 * nb))
+        self.R = np.zeros((3 * len(owned), 6 * nb), order="F")      # column-major: PETSc's dense layout
         rows = (3 * mesh.gvert[owned] - r0)[:, None] + np.arange(3)
         for b in range(nb):
             x = mesh.coords[owned[body_of[owned] == b]]
@@ -86,7 +89,11 @@ class Restraint:
             self.R[rows[sel].ravel(), 6 * b:6 * b + 6] = rigid_velocities(x, 0.5 * (lo + hi), length).reshape(-1, 6)
         held = self.R[(np.asarray(bc_dofs, dtype=np.int64) - r0)]
         self.gram_bc = held.T @ held
-        self.work = template.duplicate()
+        # the motions as one dense Mat on R's memory: a term's G R is one product, not a G.mult per motion
+        self.Rmat = PETSc.Mat().createDense((template.getSizes(), (None, self.R.shape[1])),
+                                            array=self.R.ravel(order="F"), comm=comm)
+        self.Rmat.assemble()
+        self.seen = weakref.WeakKeyDictionary()        # per term, its rows' motions (_motions): G does not change
 
     def free(self, terms, active_only, masks=None):
         """Free motions under the boundary conditions and the terms' rows (all existing rows, only the active
@@ -96,19 +103,20 @@ class Restraint:
         for i, term in enumerate(terms):
             keep = (masks[i] if masks is not None else term.active if active_only
                     else np.ones(len(term.rows), dtype=bool))
-            rows = term.rows[keep]
-            W = term.W.getArray()[rows]
-            y = term.G.createVecLeft()
-            block = np.zeros((len(rows), self.R.shape[1]))
-            for k in range(self.R.shape[1]):
-                self.work.getArray()[:] = self.R[:, k]
-                term.G.mult(self.work, y)
-                block[:, k] = y.getArray()[rows] / W
-            y.destroy()
+            block = self._motions(term)[keep]
             gram += block.T @ block
         total = np.empty_like(gram)
         self.comm.Allreduce(gram, total, op=MPI.SUM)
         return free_motions(total, self.names)
+
+    def _motions(self, term):
+        """(G_r v) / W_r of the term's existing rows r for every motion v: (rows, 6 nb), made once per term
+        (collective the first time)."""
+        if term not in self.seen:
+            GR = term.G.matMult(self.Rmat)
+            self.seen[term] = GR.getDenseArray()[term.rows] / term.W.getArray()[term.rows, None]
+            GR.destroy()
+        return self.seen[term]
 
     def loose(self, terms):
         """The motions that only active rows carrying no force hold (their force at most LOOSE_SHARE of the
@@ -123,4 +131,4 @@ class Restraint:
         return self.free(terms, True, pressing)
 
     def destroy(self):
-        self.work.destroy()
+        self.Rmat.destroy()

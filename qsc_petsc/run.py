@@ -139,12 +139,12 @@ class Run:
         with self.phases("mesh"):
             self.mesh = distribute_mesh(scene, comm)
         mesh = self.mesh
-        self.contact, extra, stencils = None, None, []
+        self.contact, extra, stencil_digests = None, None, []
         if scene.contact or scene.die:
             from .contact.model import ContactModel
             self.contact = ContactModel(mesh, scene, mesh.dof_vector(), self.phases)
             # the first increment's search comes first: K's pattern holds its contact stencil (set_terms)
-            extra, stencils = self.contact.prepare(1.0 / scene.load.steps)
+            extra, stencil_digests = self.contact.prepare(1.0 / scene.load.steps)
         with self.phases("assembly"):
             self.lmbda, self.mu = assembly.cell_materials(mesh, scene)
             # generated hex boxes read their rows from stencil templates; other meshes sum element blocks
@@ -167,7 +167,7 @@ class Run:
                                  f"pc_type is {preconditioner.amg_type()!r}")
             self.system = System(K, self.f_ext, self.bc_dofs, bc_values, nullspace, comm,
                                  scene.solver.max_active_set_iterations, scene.solver.contact_preconditioner,
-                                 scene.solver.contact_band_layers, slip, soft, stencils)
+                                 scene.solver.contact_band_layers, slip, soft, stencil_digests)
             self.n_constrained = comm.allreduce(len(self.bc_dofs), op=MPI.SUM)
             self.restraint = Restraint(mesh, self.bc_dofs, u)
             self.system.free_motions = lambda terms, active: describe(self.restraint.free(terms, active))

@@ -71,14 +71,19 @@ class ConstraintTerm:
     """One set of penalised constraint rows C = G u - g with weights W (a contact pair or a die)."""
 
     def __init__(self, name, G, g, W, phi, eps_n, closed_tol, gate_of=None, augmented=False, node_local=False,
-                 alpha=None):
+                 alpha=None, *, digest):
         self.name, self.G, self.g, self.W, self.phi, self.eps_n = name, G, g, W, phi, eps_n
+        # a digest of what made this rank's part of G and W (e.g. their triplets): equal digests on every rank,
+        # the same rows (System.set_terms keeps J as it is)
+        self.digest = digest
         # node_local: every row acts on one node's dofs (a die), so G^T D G lies inside K's 3 x 3 node blocks
         self.node_local = node_local
         self.alpha = alpha         # a contact pair's dimensionless penalty (dies: None)
         # G scaled by the rows' stiffnesses and G^T diag(d) G, kept so that each Jacobian redoes only the
         # product's numeric part (System._jacobian)
         self.DG = self.product = None
+        # the d the product holds (None once it is changed in place); its pattern (G^T G's) and the pattern's digest
+        self.product_d = self.pattern = self.pattern_digest = None
         w = W.getArray()
         self.rows = np.flatnonzero(w > 0)                 # local indices of rows that exist
         self.closed_tol = closed_tol
@@ -133,10 +138,16 @@ class ConstraintTerm:
     def jacobian(self, d=None):
         """G^T diag(d) G (d: per existing row, default the rows' stiffnesses at the last evaluate), in a matrix the
         term owns and reuses: the product's symbolic part (two thirds of its cost, 212k dofs) is done once
-        per search. The matrix is overwritten by the next call; its pattern is G^T G's whatever d."""
+        per search, and the numeric part again only for another d. The matrix is overwritten by the next call
+        (whoever changes it in place sets product_d to None); its pattern is G^T G's whatever d."""
+        d = self.d if d is None else d
+        # product_d is None on every rank or on none; whether d is the same must be too (the product is collective)
+        if self.product_d is not None and self.G.getComm().tompi4py().allreduce(np.array_equal(d, self.product_d),
+                                                                              op=MPI.LAND):
+            return self.product
         dvec = self.G.createVecLeft()
         dvec.set(0.0)
-        dvec.getArray()[self.rows] = self.d if d is None else d
+        dvec.getArray()[self.rows] = d
         if self.DG is None:
             self.DG = self.G.copy()
         else:
@@ -144,7 +155,25 @@ class ConstraintTerm:
         self.DG.diagonalScale(L=dvec)
         dvec.destroy()
         self.product = self.G.transposeMatMult(self.DG, self.product)
+        self.product_d = np.array(d, dtype=float)
         return self.product
+
+    def stencil(self):
+        """G^T G (the product with d = 1): the coupling stencil the Jacobian holds."""
+        return self.jacobian(np.ones_like(self.d))
+
+    def stencil_pattern(self):
+        """This rank's rows of the stencil's pattern (local row pointers, global columns), the product's whatever
+        d: read once, kept with its digest (stencil_digest)."""
+        if self.pattern is None:
+            ia, ja, _ = self.stencil().getValuesCSR()
+            self.pattern, self.pattern_digest = (ia, ja), array_digest(ia, ja)
+        return self.pattern
+
+    def stencil_digest(self):
+        """A digest of this rank's rows of the stencil's pattern: equal on every rank, the same coupled dofs."""
+        self.stencil_pattern()
+        return self.pattern_digest
 
     def destroy(self):
         for mat in (self.G, self.DG, self.product):
@@ -168,7 +197,7 @@ class System:
     """K0 u - t b + sum_terms G^T m with Dirichlet rows u_i - t ubar_i, solved by SNES."""
 
     def __init__(self, K, f_ext, bc_dofs, bc_values, nullspace, comm, max_it=50, contact_pc="auto", band_layers=1,
-                 slip_modes=None, multigrid_alpha=None, stencils_in_k=()):
+                 slip_modes=None, multigrid_alpha=None, k_stencil_digests=()):
         self.comm = comm
         # kept for _all_failed alone: no other collective ever runs on it, whatever the ranks were doing
         self.agree_comm = comm.Dup()
@@ -222,7 +251,7 @@ class System:
         self.stencil_signature = None
         # the same for the contact stencils K's pattern was assembled with (ContactModel.prepare): a search with
         # those makes J as K's copy, without widening its pattern; and whether J's pattern is K's
-        self.k_stencil_signature = [_pattern_digest(GtG) for GtG in stencils_in_k]
+        self.k_stencil_signature = list(k_stencil_digests)
         self.j_pattern_is_k = True
         # per term, a digest of this rank's rows (G's pattern and values, the rows that exist): a search that
         # finds the very same rows keeps J with its stiffnesses
@@ -331,7 +360,7 @@ class System:
         pattern and the band do (_keep_or_rebuild_pc may then keep its setup too)."""
         self.terms = terms
         self.prev_active = None
-        rows = [_rows_digest(term) for term in terms]
+        rows = [term.digest for term in terms]
         if terms and self.J is not self.K and self.comm.allreduce(rows == self.rows_signature, op=MPI.LAND):
             # every row as the last search's (a die with nothing else, a pair's kept term): J = K + sum G^T
             # diag(d) G as it is, with the stiffnesses it holds, and the band and the preconditioner objects it
@@ -340,10 +369,10 @@ class System:
             return
         # G^T G of every term (the terms keep the product for their Jacobians): the Jacobian's contact stencil,
         # and the contact pairs' band for the preconditioner
-        stencils = [term.jacobian(np.ones_like(term.d)) for term in terms]
+        stencils = [term.stencil() for term in terms]
         # a die's rows act on one node each: its stencil is inside K's pattern already
         coupling = [GtG for term, GtG in zip(terms, stencils) if not term.node_local]
-        signature = [_pattern_digest(GtG) for GtG in coupling]
+        signature = [term.stencil_digest() for term in terms if not term.node_local]
         kept = bool(terms) and self.J is not self.K and self.comm.allreduce(signature == self.stencil_signature,
                                                                              op=MPI.LAND)
         if not terms:
@@ -376,7 +405,8 @@ class System:
             # numeric only (the band's symbolic factorization and the composite's construction are not redone).
             # The band is a function of the stencils' pattern, so a kept pattern keeps it
             same = kept and self.band is not None
-            band = self.band if same else preconditioner.band_dofs(self.K, coupling, self.band_layers)
+            band = self.band if same else preconditioner.band_dofs(
+                self.K, [term.stencil_pattern() for term in terms if not term.node_local], self.band_layers)
             if not same:
                 self.band_dofs, self.band_parts = preconditioner.install_band_pc(
                     self.snes.getKSP(), band, self.comm, self.slip_modes,
@@ -462,6 +492,7 @@ class System:
         The term's own product matrix, overwritten by its next jacobian call."""
         C = term.jacobian(d)
         C.zeroRowsColumns(self.bc_dofs, 0.0)
+        term.product_d = None
         return C
 
     def _reset_to_stiffness(self, J):
@@ -483,7 +514,7 @@ class System:
             return
         digest = None
         if self.pc_candidate or j_changes:     # the global ids of the active rows, term by term
-            digest = _digest(*[np.append(term.c.getOwnershipRange()[0] + term.rows[term.active], -1)
+            digest = array_digest(*[np.append(term.c.getOwnershipRange()[0] + term.rows[term.active], -1)
                                for term in self.terms])
         if self.pc_candidate:
             self.pc_candidate = False
@@ -587,7 +618,7 @@ class System:
         if it == 0:
             self.sets_seen, self.damped_from, self.cycled, self.fnorms = {}, None, False, []
         self.fnorms.append(fnorm)
-        digest = _digest(np.packbits(active))
+        digest = array_digest(np.packbits(active))
         signature = tuple(self.comm.allgather(digest))
         if self.sets_seen.get(signature, it) < it - 1:
             self.cycled = True
@@ -792,23 +823,12 @@ class System:
             self.J.destroy()
 
 
-def _digest(*arrays):
+def array_digest(*arrays):
     """A 16-byte digest of the arrays' contents (this rank's: compare them with an allreduce)."""
     h = hashlib.blake2b(digest_size=16)
     for arr in arrays:
         h.update(np.ascontiguousarray(arr).tobytes())
     return h.digest()
-
-
-def _pattern_digest(A):
-    """A digest of this rank's rows of A's nonzero pattern."""
-    ia, ja, _ = A.getValuesCSR()
-    return _digest(ia, ja)
-
-
-def _rows_digest(term):
-    """A digest of this rank's part of a term's rows: G's pattern and values and which rows exist."""
-    return _digest(*term.G.getValuesCSR(), term.rows)
 
 
 def _all_failed(comm, seconds=AGREE_SECONDS):
