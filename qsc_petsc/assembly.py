@@ -225,7 +225,7 @@ def _widen_rows(key, rows, extra, v0, v1):
     part, global column, entry mask), each (len(rows), width); a template block's mask is all nine entries.
     An extra block the template has already is not added again."""
     er, ec, eb = (np.asarray(a, np.int64) for a in extra)
-    order = np.lexsort((ec, er))
+    order = np.argsort((er << 32) | ec)          # by row, then column (vertex numbers < 2^31): one key, not lexsort
     er, ec, eb = er[order], ec[order], eb[order]
     first = np.r_[True, (er[1:] != er[:-1]) | (ec[1:] != ec[:-1])]          # one block per (row, column)
     starts = np.flatnonzero(first)

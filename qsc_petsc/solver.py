@@ -824,10 +824,12 @@ class System:
 
 
 def array_digest(*arrays):
-    """A 16-byte digest of the arrays' contents (this rank's: compare them with an allreduce)."""
-    h = hashlib.blake2b(digest_size=16)
+    """A SHA-256 digest of the arrays' contents (this rank's: compare them with an allreduce). SHA-256, not
+    BLAKE2b: 12 MB in 8.0 against 28 ms on this project's machines, and a search digests its triplets and its
+    stencil's pattern (tens of MB at 212k dofs)."""
+    h = hashlib.sha256()
     for arr in arrays:
-        h.update(np.ascontiguousarray(arr).tobytes())
+        h.update(memoryview(np.ascontiguousarray(arr)).cast("B"))
     return h.digest()
 
 

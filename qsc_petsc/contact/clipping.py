@@ -14,7 +14,7 @@ bilinear) maps. Natural coordinates follow qsc_petsc.fem.
 import numpy as np
 
 from qsc_petsc import fem
-from qsc_petsc.contact.geometry import face_normal_at, face_tangents_at
+from qsc_petsc.contact.geometry import cross, face_normal_at, face_tangents_at
 from qsc_petsc.errors import MeshError
 
 NEWTON_TOL = 1e-13          # on the natural-coordinate update (xi is O(1))
@@ -257,7 +257,7 @@ def _plane_frames(type_s, xs):
     t1, _ = face_tangents_at(type_s, xs, xi_c)
     e1 = t1 - np.einsum("mi,mi->m", t1, n)[:, None] * n
     e1 /= np.linalg.norm(e1, axis=1)[:, None]
-    return centre, n, e1, np.cross(n, e1)
+    return centre, n, e1, cross(n, e1)
 
 
 def _empty_result():
@@ -358,7 +358,7 @@ def _segment_chunk(type_s, xs, type_t, xt, bary, wr, area_tol, max_normal_dot, f
     xi_t = _inverse_map(Bt @ pt[pair], p, "T")
     c, a1, a2, a12 = (K[:, None] for K in np.moveaxis(Bs @ xs[pair], 1, 0))
     x = c + xi_s[..., 0, None] * a1 + xi_s[..., 1, None] * a2 + (xi_s[..., 0] * xi_s[..., 1])[..., None] * a12
-    a = np.cross(a1 + xi_s[..., 1, None] * a12, a2 + xi_s[..., 0, None] * a12)
+    a = cross(a1 + xi_s[..., 1, None] * a12, a2 + xi_s[..., 0, None] * a12)
     ratio = np.sqrt((a * a).sum(axis=-1)) / np.abs((a * n[pair, None]).sum(axis=-1))
     nq = p.shape[0] * p.shape[1]
     return {"pair": np.repeat(pair + first, len(wr)).astype(np.int64), "x": x.reshape(nq, 3),

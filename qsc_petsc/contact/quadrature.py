@@ -93,9 +93,8 @@ def segment_pass(face_type, xs_ref, xs_cur, s_gids, xt_ref, xt_cur, t_gids, t_si
     si, tj, Ns, Nt, normal = si[k], tj[k], Ns[k], Nt[k], normal[k]
     xi_s = q["xi_s"][k]
 
-    def jac(xf):
-        return np.linalg.norm(np.cross(*geometry.face_tangents_at(type_s, xf, xi_s)), axis=-1)
-    weight = q["weight"][k] * jac(xs_ref[si]) / jac(xs_cur[si])
+    weight = (q["weight"][k] * geometry.face_area_density_at(type_s, xs_ref[si], xi_s)
+              / geometry.face_area_density_at(type_s, xs_cur[si], xi_s))
     x_ref = np.einsum("pv,pvi->pi", Ns, xs_ref[si])
     delta0 = np.einsum("pi,pi->p", x_ref - np.einsum("pv,pvi->pi", Nt, xt_ref[tj]), normal)
     src = np.asarray(s_gids, dtype=np.int64)[si]
