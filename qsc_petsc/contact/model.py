@@ -296,8 +296,8 @@ class ContactModel:
         that K's pattern can hold the pairs' contact stencil and J need not be made anew with a wider one
         (set_terms; MatAXPY with a new pattern re-inserted every entry of K, 0.42 s at 212k dofs). Returns the
         stencil's entries by 3x3 block (K's `extra`: rows owned here) and the digests of the pairs' stencils
-        (ConstraintTerm.stencil_digest); the first terms() call,
-        at u = 0 and t, takes these terms instead of searching again (collective)."""
+        (ConstraintTerm.stencil_digest); the first terms() call, at u = 0 and t, takes these terms instead of
+        searching again (collective)."""
         u = self.template.duplicate()
         u.set(0.0)
         U = self.mesh.local_vectors(u)

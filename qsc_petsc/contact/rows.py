@@ -160,9 +160,9 @@ def _grouped_products(a, b, starts, counts):
 def _tested_rows(pss, scale, test_nodes, test_shape):
     """Point q's w_q h_q, times scale_q N^k, added to row 3 k for every test node k (test_nodes (p, nt)).
 
-    The points of one (S face, T face) pair share their columns and test rows: their entries are
-    summed here, one block per pair (per run of its points) and test node (segment integration has tens of points per pair,
-    and the distributed matrix would otherwise receive and sum each entry that many times)."""
+    The points of one (S face, T face) pair share their columns and test rows: their entries are summed
+    here, one block per pair (per run of its points) and test node (segment integration has tens of points
+    per pair, and the distributed matrix would otherwise receive and sum each entry that many times)."""
     nodes, vals, g, W = _pass_entries(pss)
     p = len(pss.node)
     ncol = vals.shape[1]
