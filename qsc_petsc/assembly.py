@@ -225,10 +225,10 @@ def _widen_rows(key, rows, extra, v0, v1):
     part, global column, entry mask), each (len(rows), width); a template block's mask is all nine entries.
     An extra block the template has already is not added again."""
     er, ec, eb = (np.asarray(a, np.int64) for a in extra)
-    order = np.argsort((er << 32) | ec)          # by row, then column (vertex numbers < 2^31): one key, not lexsort
-    er, ec, eb = er[order], ec[order], eb[order]
-    first = np.r_[True, (er[1:] != er[:-1]) | (ec[1:] != ec[:-1])]          # one block per (row, column)
-    starts = np.flatnonzero(first)
+    block = (er << 32) | ec                      # by row, then column (vertex numbers < 2^31): one key, not lexsort
+    order = np.argsort(block)
+    er, ec, eb, block = er[order], ec[order], eb[order], block[order]
+    starts = np.flatnonzero(np.r_[True, block[1:] != block[:-1]])          # one block per (row, column)
     er, ec, eb = er[starts], ec[starts], np.bitwise_or.reduceat(eb, starts) if len(eb) else eb
     pos = np.searchsorted(rows, er)
     keep = (pos < len(rows)) & (rows[np.minimum(pos, len(rows) - 1)] == er)

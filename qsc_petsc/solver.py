@@ -371,8 +371,9 @@ class System:
         # and the contact pairs' band for the preconditioner
         stencils = [term.stencil() for term in terms]
         # a die's rows act on one node each: its stencil is inside K's pattern already
+        pairs = [term for term in terms if not term.node_local]
         coupling = [GtG for term, GtG in zip(terms, stencils) if not term.node_local]
-        signature = [term.stencil_digest() for term in terms if not term.node_local]
+        signature = [term.stencil_digest() for term in pairs]
         kept = bool(terms) and self.J is not self.K and self.comm.allreduce(signature == self.stencil_signature,
                                                                              op=MPI.LAND)
         if not terms:
@@ -406,14 +407,13 @@ class System:
             # The band is a function of the stencils' pattern, so a kept pattern keeps it
             same = kept and self.band is not None
             band = self.band if same else preconditioner.band_dofs(
-                self.K, [term.stencil_pattern() for term in terms if not term.node_local], self.band_layers)
+                self.K, [term.stencil_pattern() for term in pairs], self.band_layers)
             if not same:
                 self.band_dofs, self.band_parts = preconditioner.install_band_pc(
                     self.snes.getKSP(), band, self.comm, self.slip_modes,
                     self.softened if self.multigrid_alpha is not None else None)
                 self.band, self.pc_rows = band, None
             # the first Jacobian may keep the preconditioner as it is (_keep_or_rebuild_pc) if the rows barely moved
-            pairs = [term for term in terms if not term.node_local]
             self.pc_candidate = same and self._stencils_close(pairs, coupling)
             self.search_stencils = [GtG.copy() for GtG in coupling]
 

@@ -304,10 +304,11 @@ class ContactModel:
         self.prepared = (t, {f"contact[{pd['index']}]": self._search(pd, U, u, t, None) for pd in self.pairs})
         u.destroy()
         rows, cols, digests = [], [], []
+        r0 = self.template.getOwnershipRange()[0]          # G^T G's rows are the dofs'
         with self._phase("rows"):
             for term in self.prepared[1].values():
                 ia, ja = term.stencil_pattern()
-                rows.append(np.repeat(np.arange(len(ia) - 1), np.diff(ia)) + term.stencil().getOwnershipRange()[0])
+                rows.append(np.repeat(np.arange(len(ia) - 1), np.diff(ia)) + r0)
                 cols.append(ja)
                 digests.append(term.stencil_digest())
         if not digests:
