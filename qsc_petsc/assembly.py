@@ -152,28 +152,37 @@ def lattice_stiffness_matrix(mesh, lattices, extra=None):
     T, P, tid, gcol = _box_rows(mesh, lattices)
     n = len(tid)
     valid = P[tid]
-    # one sort per row orders the blocks as PETSc's split CSR wants them: diagonal part, off-diagonal
-    # part, absent ones last, each by column; the block's offset index in the low bits
-    part = np.where(~valid, 2, np.where((gcol >= v0) & (gcol < v1), 0, 1))
-    key = (part << _PART_SHIFT) | (gcol << _IDX_BITS) | np.arange(27)
-    key.sort(axis=1)
-    d, part, gcol = _unkey(key)
-    # entries per point row (3 per vertex row) in the diagonal and off-diagonal parts
-    count = [np.repeat(3 * (part == p).sum(axis=1), 3).reshape(n, 3) for p in (0, 1)]
-    natural = (count[1][:, 0] == 0) & ((d[:, 1:] > d[:, :-1]) | (part[:, 1:] == 2)).all(axis=1)
+    owned = (gcol >= v0) & (gcol < v1)
+    blocks_of = [np.flatnonzero(P[t]) for t in range(len(T))]       # a template's blocks, in offset order
+    # a natural row: every block owned and the columns ascending in offset order, its template as it stands
+    natural = (owned | ~valid).all(axis=1)
+    for t in np.unique(tid[natural]):
+        rows = np.flatnonzero(natural & (tid == t))
+        g = gcol[rows] if len(blocks_of[t]) == 27 else gcol[rows[:, None], blocks_of[t]]
+        natural[rows] = (g[:, 1:] > g[:, :-1]).all(axis=1)
     widened = np.zeros(n, bool)
     if extra is not None and len(extra[0]):
         widened[np.asarray(extra[0], np.int64) - v0] = True
         natural &= ~widened
     runs = sparsity.equal_runs(tid, natural)
     odd = np.flatnonzero(~sparsity.covered(runs, n))
+    # the other rows: one sort per row orders the blocks as PETSc's split CSR wants them: diagonal part,
+    # off-diagonal part, absent ones last, each by column; the block's offset index in the low bits
+    part = np.where(~valid[odd], 2, np.where(owned[odd], 0, 1))
+    key = (part << _PART_SHIFT) | (gcol[odd] << _IDX_BITS) | np.arange(27)
+    key.sort(axis=1)
+    d, part, ocol = _unkey(key)
+    # entries per point row (3 per vertex row) in the diagonal and off-diagonal parts
+    count = [np.zeros((n, 3), np.int64), np.zeros((n, 3), np.int64)]
+    count[0][:] = (3 * P.sum(axis=1))[tid, None]
+    for p in (0, 1):
+        count[p][odd] = 3 * (part == p).sum(axis=1)[:, None]
     # the other rows, the widened ones with their extra blocks: (rows, offset index, part, global column, entry
     # mask (bit 3 i + k) of each of their blocks)
-    plain = odd[~widened[odd]]
-    groups = [(plain, d[plain], part[plain], gcol[plain], None)]
-    if widened.any():
-        wide = np.flatnonzero(widened)
-        groups.append((wide, *_widen_rows(key[wide], wide + v0, extra, v0, v1)))
+    wide = widened[odd]
+    groups = [(odd[~wide], d[~wide], part[~wide], ocol[~wide], None)]
+    if wide.any():
+        groups.append((odd[wide], *_widen_rows(key[wide], odd[wide] + v0, extra, v0, v1)))
     masks = []                  # per group and part: which of its (rows, 3, w, 3) entries it holds
     for rows, od, opart, ocol, bits in groups:
         masks.append([])
@@ -189,9 +198,11 @@ def lattice_stiffness_matrix(mesh, lattices, extra=None):
     trip = np.arange(3, dtype=PETSc.IntType)
     present = [T[t][:, P[t]].ravel() for t in range(len(T))]      # a natural row's values: its template's blocks
     for a, b in runs:
-        nb, p0, p1 = count[0][a, 0] // 3, ptr[0][3 * a], ptr[0][3 * b]
-        vals_d[p0:p1].reshape(b - a, -1)[:] = present[tid[a]]
-        cols_d[p0:p1].reshape(b - a, 3, nb, 3)[:] = (3 * (gcol[a:b, :nb] - v0))[:, None, :, None] + trip
+        t = tid[a]
+        nb, p0, p1 = len(blocks_of[t]), ptr[0][3 * a], ptr[0][3 * b]
+        vals_d[p0:p1].reshape(b - a, -1)[:] = present[t]
+        g = gcol[a:b] if nb == 27 else gcol[a:b, blocks_of[t]]
+        cols_d[p0:p1].reshape(b - a, 3, nb, 3)[:] = (3 * (g - v0))[:, None, :, None] + trip
     for (rows, od, opart, ocol, _), sels in zip(groups, masks):
         blocks = T[tid[rows, None, None], np.arange(3)[:, None], np.minimum(od, 26)[:, None, :]]    # (rows, 3, w, 3)
         if od.shape[1] > 27:
