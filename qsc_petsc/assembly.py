@@ -166,6 +166,7 @@ def lattice_stiffness_matrix(mesh, lattices, extra=None):
         natural &= ~widened
     runs = sparsity.equal_runs(tid, natural)
     odd = np.flatnonzero(~sparsity.covered(runs, n))
+    lone, odd = odd[natural[odd]], odd[~natural[odd]]      # natural rows outside the runs, and the others
     # the other rows: one sort per row orders the blocks as PETSc's split CSR wants them: diagonal part,
     # off-diagonal part, absent ones last, each by column; the block's offset index in the low bits
     part = np.where(~valid[odd], 2, np.where(owned[odd], 0, 1))
@@ -203,6 +204,13 @@ def lattice_stiffness_matrix(mesh, lattices, extra=None):
         vals_d[p0:p1].reshape(b - a, -1)[:] = present[t]
         g = gcol[a:b] if nb == 27 else gcol[a:b, blocks_of[t]]
         cols_d[p0:p1].reshape(b - a, 3, nb, 3)[:] = (3 * (g - v0))[:, None, :, None] + trip
+    for t in np.unique(tid[lone]):               # natural rows alone: template by template
+        rows = lone[tid[lone] == t]
+        nb = len(blocks_of[t])
+        at = ptr[0][3 * rows][:, None] + np.arange(9 * nb)
+        vals_d[at] = present[t]
+        first = (3 * (gcol[rows[:, None], blocks_of[t]] - v0))[:, None, :, None] + trip
+        cols_d[at] = np.broadcast_to(first, (len(rows), 3, nb, 3)).reshape(len(rows), -1)
     for (rows, od, opart, ocol, _), sels in zip(groups, masks):
         blocks = T[tid[rows, None, None], np.arange(3)[:, None], np.minimum(od, 26)[:, None, :]]    # (rows, 3, w, 3)
         if od.shape[1] > 27:
@@ -276,15 +284,16 @@ def _box_rows(mesh, lattices):
     body = np.searchsorted(ends, orig, side="right") - 1
     nt = 27 * len(lattices)
     T, P = np.empty((nt, 3, 27, 3)), np.empty((nt, 27), bool)
-    tid, step = np.empty(len(own), np.int64), np.empty((len(own), 27), np.int64)
+    tid, steps = np.empty(len(own), np.int64), np.empty((len(lattices), 27), PETSc.IntType)
     for b, box in enumerate(lattices):
         T[27 * b:27 * b + 27], P[27 * b:27 * b + 27] = lattice.templates(box.Ke)
         mine = body == b
         tid[mine] = 27 * b + lattice.vertex_classes(box, orig[mine] - box.offset)
-        step[mine] = lattice.OFFSETS @ box.stride
+        steps[b] = lattice.OFFSETS @ box.stride
     ao = PETSc.AO().createBasic(mesh.vert_orig[mesh.owned].astype(PETSc.IntType),
                                 mesh.gvert[mesh.owned].astype(PETSc.IntType), comm=mesh.comm)
-    nbr = np.where(P[tid], orig[:, None] + step, 0).ravel().astype(PETSc.IntType)
+    nbr = orig.astype(PETSc.IntType)[:, None] + (steps[0] if len(lattices) == 1 else steps[body])
+    nbr = np.where(P[tid], nbr, 0).ravel()
     gcol = np.asarray(ao.app2petsc(nbr), np.int64).reshape(len(own), 27)
     ao.destroy()
     return T, P, tid, gcol
@@ -629,7 +638,7 @@ def rigid_body_modes(mesh, template, held=()):
         for field in _rigid_fields(mesh.comm, x):
             v = template.duplicate()
             v.set(0.0)
-            v.getArray()[r[:, None] + np.arange(3)] = field
+            v.getArray().reshape(-1, 3)[r // 3] = field       # by vertex row (r0 is a multiple of 3)
             modes.append(v)
         for v in modes:
             a = v.getArray()
