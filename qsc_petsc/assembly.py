@@ -141,8 +141,9 @@ def lattice_stiffness_matrix(mesh, lattices, extra=None):
     so no values are sent; the global numbers of the neighbours come from a PETSc application
     ordering (original vertex id -> PETSc vertex number). A row whose neighbours are all owned
     and numbered in lattice order (distribute_mesh numbers owned vertices in original order: most
-    rows) is its template as it stands, and runs of such rows with one template are written as
-    one broadcast; the other rows are gathered block by block.
+    rows) is its template as it stands: runs of such rows with one template are written as one
+    broadcast, such rows outside a run template by template; only the other rows are sorted and
+    gathered block by block.
 
     extra: None or (rows, cols, bits): entries to hold in the pattern with value 0, e.g. a contact stencil,
     by 3x3 block (global vertex numbers, rows owned here) and which of the block's entries (bit 3 i + k:
