@@ -9,7 +9,7 @@ import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from . import elasticity, fem, lattice, sparsity
+from . import elasticity, elimination, fem, lattice, sparsity
 from .errors import MeshError, SceneError
 from .expression import compile_expression
 from .mesh import on_all
@@ -61,20 +61,22 @@ def plain_rows(A):
     A.setOption(PETSc.Mat.Option.USE_INODES, not PETSc.Options().getBool("mat_no_inode", True))
 
 
-def _stiffness_operator(size, csr, comm):
+def _stiffness_operator(size, csr, comm, r0, fixed):
     """K from its CSR arrays (split diagonal / off-diagonal parts on several ranks), as both assemblies hand it
-    over: block size 3, no new nonzeros, the plain row kernel."""
+    over: block size 3, no new nonzeros, the plain row kernel. fixed: None, or (owned dofs, values) whose rows
+    and columns are taken out first (elimination.py): then (K0, lifting)."""
+    lift = None if fixed is None else elimination.eliminate(csr, r0, *fixed, comm)
     A = PETSc.Mat().createAIJWithArrays(size, csr, comm=comm)
     A.setBlockSizes(3, 3)          # createAIJWithArrays ignores bsize; GAMG aggregates by it
     A.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, True)
     plain_rows(A)
-    return A
+    return A if fixed is None else (A, lift)
 
 
 BATCH = 1 << 19           # candidates (element blocks) summed per batch: ~40 MB of temporaries
 
 
-def stiffness_matrix(mesh, lmbda, mu, extra=None):
+def stiffness_matrix(mesh, lmbda, mu, extra=None, fixed=None):
     """The elastic stiffness K: a dof-space MPIAIJ matrix (block size 3) whose CSR arrays are built here.
 
     Rows are vertices (sparsity.py). Each rank sums its cells' element blocks into the rows it
@@ -82,7 +84,8 @@ def stiffness_matrix(mesh, lmbda, mu, extra=None):
     split (diagonal | off-diagonal) CSR arrays, which PETSc uses without copying. The pattern is
     exact: no new nonzero may be added later. Element kernels run once per group of congruent
     cells (elasticity.congruent_groups) and batch of rows. lmbda, mu: (local cells,) [Pa]. extra: None or
-    (rows, cols, bits) as lattice_stiffness_matrix takes it: the blocks are held whole."""
+    (rows, cols, bits) as lattice_stiffness_matrix takes it: the blocks are held whole. fixed: None, or
+    (owned dofs, values) of the Dirichlet conditions: then (K0, lifting) (_stiffness_operator)."""
     comm = mesh.comm
     v0, v1 = mesh.vertex_range
     order = np.argsort(mesh.gvert, kind="stable")            # rows in global order: owned ones are one run
@@ -130,10 +133,10 @@ def stiffness_matrix(mesh, lmbda, mu, extra=None):
     else:
         oi = sparsity.point_rowptr(rowptr_o, np.diff(pattern.rowptr) - n_diag).astype(PETSc.IntType)
         csr = ((di, cols[:n_d], vals[:n_d]), (oi, cols[n_d:], vals[n_d:]))
-    return _stiffness_operator(size, csr, comm)
+    return _stiffness_operator(size, csr, comm, 3 * v0, fixed)
 
 
-def lattice_stiffness_matrix(mesh, lattices, extra=None):
+def lattice_stiffness_matrix(mesh, lattices, extra=None, fixed=None):
     """The elastic stiffness K of a mesh made only of generated hex boxes, read from row templates
     (lattice.py): the same matrix as stiffness_matrix up to round-off, without summing element blocks.
 
@@ -147,7 +150,7 @@ def lattice_stiffness_matrix(mesh, lattices, extra=None):
 
     extra: None or (rows, cols, bits): entries to hold in the pattern with value 0, e.g. a contact stencil,
     by 3x3 block (global vertex numbers, rows owned here) and which of the block's entries (bit 3 i + k:
-    row i, column k; a flat contact's rows couple only the normal components)."""
+    row i, column k; a flat contact's rows couple only the normal components). fixed: as stiffness_matrix."""
     comm = mesh.comm
     v0, v1 = mesh.vertex_range
     T, P, tid, gcol = _box_rows(mesh, lattices)
@@ -227,7 +230,7 @@ def lattice_stiffness_matrix(mesh, lattices, extra=None):
     if comm.size > 1:
         csr = (csr, (ptr[1].astype(PETSc.IntType), cols_o, vals_o))
     size = ((3 * n, 3 * mesh.n_vertices), (3 * n, 3 * mesh.n_vertices))
-    return _stiffness_operator(size, csr, comm)
+    return _stiffness_operator(size, csr, comm, 3 * v0, fixed)
 
 
 # lattice_stiffness_matrix's sort keys: part (0 diagonal, 1 off-diagonal, 2 absent) | global column | offset index

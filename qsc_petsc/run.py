@@ -150,11 +150,13 @@ class Run:
             # generated hex boxes read their rows from stencil templates; other meshes sum element blocks
             lattices = lattice.box_lattices(scene)
             self.stiffness_path = "box stencils" if lattices else "element blocks"
-            K = (assembly.lattice_stiffness_matrix(mesh, lattices, extra) if lattices
-                 else assembly.stiffness_matrix(mesh, self.lmbda, self.mu, extra))
+            self.bc_dofs, bc_values, self.bc_per_boundary = assembly.dirichlet_dofs(mesh, scene)
+            # K arrives as K0 with its lifting: the Dirichlet rows and columns go while its arrays are ours
+            fixed = (self.bc_dofs, bc_values)
+            K, lifting = (assembly.lattice_stiffness_matrix(mesh, lattices, extra, fixed) if lattices
+                          else assembly.stiffness_matrix(mesh, self.lmbda, self.mu, extra, fixed))
             u = K.createVecRight()
             self.f_ext = assembly.surface_load(mesh, scene, u)
-            self.bc_dofs, bc_values, self.bc_per_boundary = assembly.dirichlet_dofs(mesh, scene)
             held = [(surface, None if die.condition == "sticking" else np.asarray(die.normal, float))
                     for die in scene.die for surface in die.surfaces]
             nullspace = assembly.rigid_body_modes(mesh, u, held)
@@ -167,7 +169,7 @@ class Run:
                                  f"pc_type is {preconditioner.amg_type()!r}")
             self.system = System(K, self.f_ext, self.bc_dofs, bc_values, nullspace, comm,
                                  scene.solver.max_active_set_iterations, scene.solver.contact_preconditioner,
-                                 scene.solver.contact_band_layers, slip, soft, stencil_digests)
+                                 scene.solver.contact_band_layers, slip, soft, stencil_digests, lifting)
             self.n_constrained = comm.allreduce(len(self.bc_dofs), op=MPI.SUM)
             self.restraint = Restraint(mesh, self.bc_dofs, u)
             self.system.free_motions = lambda terms, active: describe(self.restraint.free(terms, active))

@@ -194,10 +194,13 @@ class ConstraintTerm:
 
 
 class System:
-    """K0 u - t b + sum_terms G^T m with Dirichlet rows u_i - t ubar_i, solved by SNES."""
+    """K0 u - t b + sum_terms G^T m with Dirichlet rows u_i - t ubar_i, solved by SNES.
+
+    K: the stiffness, whose Dirichlet rows and columns are taken out here (MatZeroRowsColumns), or K0 already
+    when `lifting` (what its fixed columns took from the load, elimination.py) is given."""
 
     def __init__(self, K, f_ext, bc_dofs, bc_values, nullspace, comm, max_it=50, contact_pc="auto", band_layers=1,
-                 slip_modes=None, multigrid_alpha=None, k_stencil_digests=()):
+                 slip_modes=None, multigrid_alpha=None, k_stencil_digests=(), lifting=None):
         self.comm = comm
         # kept for _all_failed alone: no other collective ever runs on it, whatever the ranks were doing
         self.agree_comm = comm.Dup()
@@ -215,7 +218,12 @@ class System:
         ubar.assemble()
         self.ubar = ubar
         self.b = f_ext.copy()
-        K.zeroRowsColumns(bc_dofs.astype(PETSc.IntType), 1.0, ubar, self.b)   # K0 and its lifting
+        if lifting is None:
+            K.zeroRowsColumns(bc_dofs.astype(PETSc.IntType), 1.0, ubar, self.b)   # K0 and its lifting
+        else:                      # K is K0 already (elimination.py): b as zeroRowsColumns would leave it
+            b = self.b.getArray()
+            b -= lifting
+            b[bc_dofs - self.u.getOwnershipRange()[0]] = bc_values
         self.b_norm = self.b.norm()
         K.setNearNullSpace(nullspace)
         self.K = K

@@ -164,6 +164,48 @@ def test_extra_blocks_widen_the_pattern_with_zeros(comm, case):
     B.destroy()
 
 
+@pytest.mark.parametrize("case", EXTRA_CASES)
+@pytest.mark.parametrize("share", [0.3, 1.0])
+def test_elimination_equals_zero_rows_columns(comm, case, share):
+    """Dirichlet rows and columns taken out of K's arrays (elimination.py) shall give MatZeroRowsColumns' K0 (diagonal
+    1) exactly and its lifting of a load to round-off, on any number of ranks: fixed dofs scattered over every rank
+    (those next to other ranks' vertices too) or all of them, nonzero values, a contact stencil's zero entries."""
+    scene_file, sets, stencils = EXTRA_CASES[case]
+    scene = load_scene(CONFIGS / scene_file, sets)
+    mesh = distribute_mesh(scene, comm)
+    v0, v1 = mesh.vertex_range
+    rng = np.random.default_rng(11 + comm.rank)
+    dofs = np.flatnonzero(rng.random(3 * (v1 - v0)) < share) + 3 * v0
+    values = rng.uniform(-1.0, 1.0, len(dofs))
+    rows = np.arange(v0, v1)
+    extra = (rows, (rows * 7 + 3) % mesh.n_vertices, np.full(len(rows), 0x111))     # far blocks, diagonal entries
+    if stencils:
+        lattices = lattice.box_lattices(scene)
+        A = assembly.lattice_stiffness_matrix(mesh, lattices, extra)
+        B, lifting = assembly.lattice_stiffness_matrix(mesh, lattices, extra, (dofs, values))
+    else:
+        materials = assembly.cell_materials(mesh, scene)
+        A = assembly.stiffness_matrix(mesh, *materials, extra=extra)
+        B, lifting = assembly.stiffness_matrix(mesh, *materials, extra=extra, fixed=(dofs, values))
+    f, ubar = A.createVecs()
+    f.setArray(rng.uniform(-1.0, 1.0, f.getLocalSize()))
+    ubar.set(0.0)
+    ubar.setValues(dofs.astype(PETSc.IntType), values)
+    ubar.assemble()
+    b = f.copy()
+    A.zeroRowsColumns(dofs.astype(PETSc.IntType), 1.0, ubar, b)
+    n = 3 * mesh.n_vertices
+    assert all_close(comm, np.array_equal(owned_dense(A, n)[0], owned_dense(B, n)[0]))
+    assert all_close(comm, _pattern_rows(A) == _pattern_rows(B))
+    mine = f.getArray() - lifting
+    mine[dofs - 3 * v0] = values
+    scale = comm.allreduce(float(np.abs(b.getArray()).max(initial=0.0)), op=MPI.MAX)
+    err = comm.allreduce(float(np.abs(mine - b.getArray()).max(initial=0.0)), op=MPI.MAX)
+    assert err <= 1e-13 * scale
+    for obj in (A, B, f, ubar, b):
+        obj.destroy()
+
+
 @pytest.mark.parametrize("scene_file, sets", [
     ("block_compression.toml", ["bodies.0.mesh.element=tet"]),
     ("hertz_coarse.toml", []),
