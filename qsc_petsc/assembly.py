@@ -625,41 +625,46 @@ def rigid_body_modes(mesh, template, held=()):
     modes lose the normal component there (None: all three). A die's stiff penalty rows make a rigid
     motion of those vertices far from near-null; left in, smoothed aggregation built coarse spaces
     that fought them (GAMG: 98 Krylov iterations against 49 on two cubes between sticking dies, 70k dofs)."""
-    vecs = []
+    comm = mesh.comm
     owned_v = np.flatnonzero(mesh.owned)
     r0 = template.getOwnershipRange()[0]
-    rows = (3 * mesh.gvert[owned_v] - r0).astype(np.int64)
+    n = template.getLocalSize() // 3
+    vertex_at = np.empty(n, dtype=np.int64)                    # the owned vertex of each vertex row
+    vertex_at[(3 * mesh.gvert[owned_v] - r0) // 3] = owned_v
     held_rows = []
     for surface, normal in held:
         v = mesh.surface_vertices(surface)
-        held_rows.append(((3 * mesh.gvert[v[mesh.owned[v]]] - r0).astype(np.int64), normal))
+        held_rows.append(((3 * mesh.gvert[v[mesh.owned[v]]] - r0) // 3, normal))
+    row_body = mesh.vertex_body[vertex_at]
+    vecs = []
     for b in range(len(mesh.body_names)):
-        in_body = mesh.body_mask(b)
-        sel = in_body[owned_v]
-        x = mesh.coords[owned_v[sel]]
-        r = rows[sel]
-        modes = []
-        for field in _rigid_fields(mesh.comm, x):
-            v = template.duplicate()
+        r = np.flatnonzero(row_body == b)
+        x = mesh.coords[vertex_at[r]]
+        if len(r) == n:
+            r = slice(None)                # the whole rank's rows: strided writes, not scattered ones
+        x -= comm.allreduce(x.sum(axis=0), op=MPI.SUM) / max(comm.allreduce(len(x)), 1)
+        modes = [template.duplicate() for _ in range(6)]
+        for k, v in enumerate(modes):      # translations along x, y, z, then rotations about z, x, y (centroid)
             v.set(0.0)
-            v.getArray().reshape(-1, 3)[r // 3] = field       # by vertex row (r0 is a multiple of 3)
-            modes.append(v)
-        for v in modes:
-            a = v.getArray()
-            for r, normal in held_rows:
-                blocks = a[r[:, None] + np.arange(3)]
+            a = v.getArray().reshape(-1, 3)            # by vertex row (r0 is a multiple of 3)
+            if k < 3:
+                a[r, k] = 1.0
+            else:
+                i, j = ((0, 1), (1, 2), (2, 0))[k - 3]
+                a[r, i] = -x[:, j]
+                a[r, j] = x[:, i]
+            for rows, normal in held_rows:
                 if normal is None:
-                    blocks[:] = 0.0
+                    a[rows] = 0.0
                 else:
-                    blocks -= np.outer(blocks @ normal, normal)
-                a[r[:, None] + np.arange(3)] = blocks
+                    a[rows] -= np.outer(a[rows] @ normal, normal)
         # modified Gram-Schmidt: MatNullSpace wants an orthonormal basis
         for k, v in enumerate(modes):
             for w in modes[:k]:
                 v.axpy(-v.dot(w), w)
             v.normalize()
         vecs.extend(modes)
-    return PETSc.NullSpace().create(vectors=vecs, comm=mesh.comm)
+    return PETSc.NullSpace().create(vectors=vecs, comm=comm)
 
 
 def slip_modes(mesh, template, surfaces, held_dofs):

@@ -8,6 +8,7 @@ order and every tie rule stay independent of the number of ranks.
 """
 
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 from mpi4py import MPI
@@ -104,11 +105,16 @@ class LocalMesh:
         """Local vertex indices of a body."""
         return np.flatnonzero(self.body_mask(body))
 
+    @cached_property
+    def vertex_body(self):
+        """Body index of each local vertex (bodies share no vertex; -1 for a vertex in no local cell)."""
+        body = np.full(len(self.coords), -1, dtype=self.cell_body.dtype)
+        body[self.cells] = self.cell_body[:, None]
+        return body
+
     def body_mask(self, body):
         """Whether each local vertex belongs to a body (a mask needs no sorted vertex list)."""
-        mask = np.zeros(len(self.coords), dtype=bool)
-        mask[self.cells[self.cell_body == body]] = True
-        return mask
+        return self.vertex_body == body
 
 
 def on_root(comm, fn):

@@ -72,33 +72,48 @@ class Restraint:
     def __init__(self, mesh, bc_dofs, template):
         comm = mesh.comm
         self.comm, self.names = comm, list(mesh.body_names)
-        nb = len(self.names)
-        r0 = template.getOwnershipRange()[0]
+        self.mesh, self.sizes = mesh, template.getSizes()
+        self.r0 = template.getOwnershipRange()[0]
         owned = np.flatnonzero(mesh.owned)
-        body_of = np.full(len(mesh.coords), -1)
-        for b in range(nb):
-            body_of[mesh.body_mask(b)] = b
-        # (owned dofs, 6 nb) columns: each body's six motions, zero elsewhere
-        self.R = np.zeros((3 * len(owned), 6 * nb), order="F")      # column-major: PETSc's dense layout
-        rows = (3 * mesh.gvert[owned] - r0)[:, None] + np.arange(3)
-        for b in range(nb):
-            x = mesh.coords[owned[body_of[owned] == b]]
+        self.frames = []            # per body: the centre [m] and length [m] its rotations are taken with
+        for b in range(len(self.names)):
+            x = mesh.coords[owned[mesh.body_mask(b)[owned]]]
             lo, hi = np.empty(3), np.empty(3)
             comm.Allreduce(x.min(axis=0) if len(x) else np.full(3, np.inf), lo, op=MPI.MIN)
             comm.Allreduce(x.max(axis=0) if len(x) else np.full(3, -np.inf), hi, op=MPI.MAX)
-            length = float(np.linalg.norm(hi - lo)) or 1.0
-            sel = body_of[owned] == b
-            at = rows[sel].ravel()
-            v = rigid_velocities(x, 0.5 * (lo + hi), length).reshape(-1, 6)
-            for k in range(6):                   # column by column: R's columns are contiguous
-                self.R[at, 6 * b + k] = v[:, k]
-        held = self.R[(np.asarray(bc_dofs, dtype=np.int64) - r0)]
+            self.frames.append((0.5 * (lo + hi), float(np.linalg.norm(hi - lo)) or 1.0))
+        # the boundary conditions' rows of the motions: only their vertices' velocities are needed
+        dofs = np.asarray(bc_dofs, dtype=np.int64) - self.r0
+        vertex_at = np.empty(len(owned), dtype=np.int64)        # owned vertex of each vertex row
+        vertex_at[(3 * mesh.gvert[owned] - self.r0) // 3] = owned
+        held = self._velocities(vertex_at[dofs // 3], dofs % 3)
         self.gram_bc = held.T @ held
-        # the motions as one dense Mat on R's memory: a term's G R is one product, not a G.mult per motion
-        self.Rmat = PETSc.Mat().createDense((template.getSizes(), (None, self.R.shape[1])),
-                                            array=self.R.ravel(order="F"), comm=comm)
-        self.Rmat.assemble()
+        self.Rmat = None            # every owned dof's motions, made for the first contact term (_motion_matrix)
         self.seen = weakref.WeakKeyDictionary()        # per term, its rows' motions (_motions): G does not change
+
+    def _velocities(self, vertices, components):
+        """Rows (k, 6 nb) of the motions at the given components of local vertices: each body's six, zero elsewhere."""
+        out = np.zeros((len(vertices), 6 * len(self.names)))
+        body = self.mesh.vertex_body[vertices]
+        for b, (centre, length) in enumerate(self.frames):
+            sel = np.flatnonzero(body == b)
+            v = rigid_velocities(self.mesh.coords[vertices[sel]], centre, length)
+            out[sel, 6 * b:6 * b + 6] = v[np.arange(len(sel)), components[sel]]
+        return out
+
+    def _motion_matrix(self):
+        """The motions of every owned dof (owned dofs, 6 nb) as one dense Mat: a term's G R is one product, not a
+        G.mult per motion (collective the first time)."""
+        if self.Rmat is None:
+            mesh = self.mesh
+            owned = np.flatnonzero(mesh.owned)
+            rows = ((3 * mesh.gvert[owned] - self.r0)[:, None] + np.arange(3)).ravel()
+            R = np.empty((len(rows), 6 * len(self.names)), order="F")      # column-major: PETSc's dense layout
+            R[rows] = self._velocities(np.repeat(owned, 3), np.tile(np.arange(3), len(owned)))
+            self.Rmat = PETSc.Mat().createDense((self.sizes, (None, R.shape[1])), array=R.ravel(order="F"),
+                                                comm=self.comm)
+            self.Rmat.assemble()
+        return self.Rmat
 
     def free(self, terms, active_only, masks=None):
         """Free motions under the boundary conditions and the terms' rows (all existing rows, only the active
@@ -118,7 +133,7 @@ class Restraint:
         """(G_r v) / W_r of the term's existing rows r for every motion v: (rows, 6 nb), made once per term
         (collective the first time)."""
         if term not in self.seen:
-            GR = term.G.matMult(self.Rmat)
+            GR = term.G.matMult(self._motion_matrix())
             self.seen[term] = GR.getDenseArray()[term.rows] / term.W.getArray()[term.rows, None]
             GR.destroy()
         return self.seen[term]
@@ -136,4 +151,5 @@ class Restraint:
         return self.free(terms, True, pressing)
 
     def destroy(self):
-        self.Rmat.destroy()
+        if self.Rmat is not None:
+            self.Rmat.destroy()
