@@ -96,6 +96,7 @@ LATTICE_CASES = {
     "one cell thick, unequal sides": ("block_compression.toml", ["bodies.0.mesh.cells=[5,1,3]",
                                                                   "bodies.0.mesh.size=[2.0,0.3,1.0]"]),
     "hex box": ("block_compression.toml", ["bodies.0.mesh.cells=[4,3,5]"]),
+    "lines long enough for runs, planes of them": ("block_compression.toml", ["bodies.0.mesh.cells=[9,6,5]"]),
     "two bodies, one rotated and stiffer": ("two_cubes_dies.toml", TWO_BODIES),
 }
 
