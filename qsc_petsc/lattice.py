@@ -7,6 +7,7 @@ block T[c, d] at the neighbour offset d in {-1, 0, 1}^3 wherever P[c, d] (the tw
 a cell). Assembly then reads templates instead of summing element blocks (assembly.py).
 """
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -57,15 +58,11 @@ def box_lattices(scene):
     return out
 
 
-def templates(Ke):
-    """(T, P) of one box: T (27 classes, 3, 27 offsets, 3) summed blocks laid out as point rows
-    (T[c, i, d, j] = K[3 v + i, 3 (v + d) + j]), P (27, 27) where the block exists.
-
-    Class c = cx + 3 cy + 9 cz with, per axis, 0 at the low end (only the cell above exists),
-    1 inside (both), 2 at the high end (only the cell below)."""
-    K = Ke.reshape(8, 3, 8, 3)
-    T = np.zeros((27, 3, 27, 3))
-    P = np.zeros((27, 27), bool)
+@functools.cache
+def _template_terms():
+    """Which element block sums into which template block: (class c, offset k, node a, node b) of every term
+    T[c, :, k, :] += K[a, :, b, :] (see templates), in a fixed order."""
+    terms = []
     cells_of = ((0,), (-1, 0), (-1,))                  # cell offsets (lower corner - vertex) per axis class
     for c in range(27):
         cls = (c % 3, c // 3 % 3, c // 9)
@@ -76,9 +73,22 @@ def templates(Ke):
                     for k, (dx, dy, dz) in enumerate(OFFSETS):
                         b = _NODE.get((dx - cx, dy - cy, dz - cz))
                         if b is not None:
-                            T[c, :, k, :] += K[a, :, b, :]
-                            P[c, k] = True
-    return T, P
+                            terms.append((c, k, a, b))
+    return tuple(np.array(column) for column in zip(*terms))
+
+
+def templates(Ke):
+    """(T, P) of one box: T (27 classes, 3, 27 offsets, 3) summed blocks laid out as point rows
+    (T[c, i, d, j] = K[3 v + i, 3 (v + d) + j]), P (27, 27) where the block exists.
+
+    Class c = cx + 3 cy + 9 cz with, per axis, 0 at the low end (only the cell above exists),
+    1 inside (both), 2 at the high end (only the cell below)."""
+    c, k, a, b = _template_terms()
+    T = np.zeros((27, 27, 3, 3))
+    np.add.at(T, (c, k), Ke.reshape(8, 3, 8, 3)[a, :, b, :])       # term by term, in their order
+    P = np.zeros((27, 27), bool)
+    P[c, k] = True
+    return np.ascontiguousarray(T.transpose(0, 2, 1, 3)), P
 
 
 def vertex_classes(lattice, ids):
