@@ -17,7 +17,6 @@ from .meshgen import HEX_CORNERS, rotation_matrix
 
 # the 27 neighbour offsets d, x fastest: index (dx + 1) + 3 (dy + 1) + 9 (dz + 1)
 OFFSETS = np.array([(x, y, z) for z in (-1, 0, 1) for y in (-1, 0, 1) for x in (-1, 0, 1)])
-_NODE = {tuple(p): a for a, p in enumerate(HEX_CORNERS)}        # hex node (VTK order) at a corner offset
 
 
 @dataclass
@@ -61,20 +60,18 @@ def box_lattices(scene):
 @functools.cache
 def _template_terms():
     """Which element block sums into which template block: (class c, offset k, node a, node b) of every term
-    T[c, :, k, :] += K[a, :, b, :] (see templates), in a fixed order."""
-    terms = []
-    cells_of = ((0,), (-1, 0), (-1,))                  # cell offsets (lower corner - vertex) per axis class
-    for c in range(27):
-        cls = (c % 3, c // 3 % 3, c // 9)
-        for cx in cells_of[cls[0]]:
-            for cy in cells_of[cls[1]]:
-                for cz in cells_of[cls[2]]:
-                    a = _NODE[(-cx, -cy, -cz)]
-                    for k, (dx, dy, dz) in enumerate(OFFSETS):
-                        b = _NODE.get((dx - cx, dy - cy, dz - cz))
-                        if b is not None:
-                            terms.append((c, k, a, b))
-    return tuple(np.array(column) for column in zip(*terms))
+    T[c, :, k, :] += K[a, :, b, :] (see templates), by class, then cell (lower corner - vertex, each axis -1
+    before 0), then offset. Class c's cells: per axis, 0 above the vertex at the low end, -1 below it at the
+    high end, both inside; node a is the vertex in the cell, node b the neighbour at offset k."""
+    c, o, k = (g.ravel() for g in np.meshgrid(np.arange(27), np.arange(8), np.arange(27), indexing="ij"))
+    cls = np.stack([c % 3, c // 3 % 3, c // 9], axis=1)
+    cell = np.stack([o // 4, o // 2 % 2, o % 2], axis=1) - 1           # x slowest: the order of nested loops
+    corner = OFFSETS[k] - cell                                           # the neighbour's corner in the cell
+    keep = np.where(cell < 0, cls >= 1, cls <= 1).all(axis=1) & ((corner >= 0) & (corner <= 1)).all(axis=1)
+    node = np.empty((2, 2, 2), dtype=np.int64)                          # hex node (VTK order) at a corner
+    node[tuple(HEX_CORNERS.T)] = np.arange(8)
+    a, b = node[tuple((-cell[keep]).T)], node[tuple(corner[keep].T)]
+    return c[keep], k[keep], a, b
 
 
 def templates(Ke):
