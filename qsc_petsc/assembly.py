@@ -191,10 +191,12 @@ def lattice_stiffness_matrix(mesh, lattices, extra=None, fixed=None):
     masks = []                  # per group and part: which of its (rows, 3, w, 3) entries it holds
     for rows, od, opart, ocol, bits in groups:
         masks.append([])
+        held = None if bits is None else ((bits[:, None, :, None] >> (3 * np.arange(3)[:, None, None] + np.arange(3)))
+                                          & 1) > 0
         for p in (0, 1):
             sel = np.broadcast_to((opart == p)[:, None, :, None], (len(rows), 3, od.shape[1], 3))
-            if bits is not None:
-                sel = sel & (((bits[:, None, :, None] >> (3 * np.arange(3)[:, None, None] + np.arange(3))) & 1) > 0)
+            if held is not None:
+                sel = sel & held
                 count[p][rows] = sel.sum(axis=(2, 3))
             masks[-1].append(sel)
     ptr = [np.concatenate([[0], np.cumsum(c.ravel())]) for c in count]     # point-row pointers
@@ -249,10 +251,13 @@ def _widen_rows(key, rows, extra, v0, v1):
     An extra block the template has already is not added again."""
     er, ec, eb = (np.asarray(a, np.int64) for a in extra)
     block = (er << 32) | ec                      # by row, then column (vertex numbers < 2^31): one key, not lexsort
-    order = np.argsort(block)
-    er, ec, eb, block = er[order], ec[order], eb[order], block[order]
+    # stable: its merge sort takes the sorted columns of a contact stencil's point rows as runs (517k entries at
+    # 212k dofs: 2.6 ms against 11 ms); the ties are one block's entries, OR-ed below whatever their order
+    order = np.argsort(block, kind="stable")
+    block, eb = block[order], eb[order]
     starts = np.flatnonzero(np.r_[True, block[1:] != block[:-1]])          # one block per (row, column)
-    er, ec, eb = er[starts], ec[starts], np.bitwise_or.reduceat(eb, starts) if len(eb) else eb
+    block, eb = block[starts], np.bitwise_or.reduceat(eb, starts) if len(eb) else eb
+    er, ec = block >> 32, block & 0xFFFFFFFF
     pos = np.searchsorted(rows, er)
     keep = (pos < len(rows)) & (rows[np.minimum(pos, len(rows) - 1)] == er)
     pos, cols, eb = pos[keep], ec[keep], eb[keep]
