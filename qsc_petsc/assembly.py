@@ -153,9 +153,8 @@ def lattice_stiffness_matrix(mesh, lattices, extra=None, fixed=None):
     row i, column k; a flat contact's rows couple only the normal components). fixed: as stiffness_matrix."""
     comm = mesh.comm
     v0, v1 = mesh.vertex_range
-    T, P, tid, gcol = _box_rows(mesh, lattices)
+    T, P, tid, gcol, valid = _box_rows(mesh, lattices)
     n = len(tid)
-    valid = P[tid]
     owned = (gcol >= v0) & (gcol < v1)
     blocks_of = [np.flatnonzero(P[t]) for t in range(len(T))]       # a template's blocks, in offset order
     # a natural row: every block owned and the columns ascending in offset order, its template as it stands
@@ -284,8 +283,8 @@ def _widen_rows(key, rows, extra, v0, v1):
 
 def _box_rows(mesh, lattices):
     """Templates T (27 per box, 3, 27, 3) and P of lattice.templates, and per owned row (ascending global
-    vertex) its template id and the global vertex number of each of its 27 neighbour offsets (any
-    valid number where P says there is none)."""
+    vertex) its template id, the global vertex number of each of its 27 neighbour offsets (any
+    valid number where P says there is none) and which of them exist (P of its template)."""
     own = np.flatnonzero(mesh.owned)
     own = own[np.argsort(mesh.gvert[own])]                   # row r is global vertex v0 + r
     orig = mesh.vert_orig[own].astype(np.int64)
@@ -302,10 +301,11 @@ def _box_rows(mesh, lattices):
     ao = PETSc.AO().createBasic(mesh.vert_orig[mesh.owned].astype(PETSc.IntType),
                                 mesh.gvert[mesh.owned].astype(PETSc.IntType), comm=mesh.comm)
     nbr = orig.astype(PETSc.IntType)[:, None] + (steps[0] if len(lattices) == 1 else steps[body])
-    nbr = np.where(P[tid], nbr, 0).ravel()
+    valid = P[tid]
+    nbr = np.where(valid, nbr, 0).ravel()
     gcol = np.asarray(ao.app2petsc(nbr), np.int64).reshape(len(own), 27)
     ao.destroy()
-    return T, P, tid, gcol
+    return T, P, tid, gcol, valid
 
 
 def _row_sums(mesh, pattern, entries, groups, lmbda, mu):
