@@ -203,12 +203,15 @@ def lattice_stiffness_matrix(mesh, lattices, extra=None, fixed=None):
     vals_o, cols_o = np.empty(ptr[1][-1]), np.empty(ptr[1][-1], PETSc.IntType)
     trip = np.arange(3, dtype=PETSc.IntType)
     present = [T[t][:, P[t]].ravel() for t in range(len(T))]      # a natural row's values: its template's blocks
+    step = 3 * np.arange(max((b - a for a, b in runs), default=0), dtype=PETSc.IntType)[:, None]
     for a, b in runs:
         t = tid[a]
         nb, p0, p1 = len(blocks_of[t]), ptr[0][3 * a], ptr[0][3 * b]
         vals_d[p0:p1].reshape(b - a, -1)[:] = present[t]
-        g = gcol[a:b] if nb == 27 else gcol[a:b, blocks_of[t]]
-        cols_d[p0:p1].reshape(b - a, 3, nb, 3)[:] = (3 * (g - v0))[:, None, :, None] + trip
+        first = (3 * (gcol[a, blocks_of[t]] - v0)).astype(PETSc.IntType)[None, :, None] + trip
+        # a run's rows are consecutive vertices whose neighbours are all owned: each row's columns are the
+        # previous row's plus 3 (one add over whole rows)
+        np.add(np.broadcast_to(first, (3, nb, 3)).ravel(), step[:b - a], out=cols_d[p0:p1].reshape(b - a, -1))
     for t in np.unique(tid[lone]):               # natural rows alone: template by template
         rows = lone[tid[lone] == t]
         nb = len(blocks_of[t])
