@@ -226,9 +226,7 @@ def lattice_stiffness_matrix(mesh, lattices, extra=None, fixed=None):
         col0 = np.where(opart == 0, 3 * (ocol - v0), 3 * ocol).astype(PETSc.IntType)[:, None, :, None] + trip
         col0 = np.broadcast_to(col0, blocks.shape)
         for p, vals, cols in ((0, vals_d, cols_d), (1, vals_o, cols_o)):
-            lens = count[p][rows].ravel()
-            starts = ptr[p][(3 * rows[:, None] + np.arange(3)).ravel()]
-            at = np.repeat(starts - np.cumsum(lens) + lens, lens) + np.arange(lens.sum())
+            at, _ = sparsity.row_spans(ptr[p], (3 * rows[:, None] + np.arange(3)).ravel())
             vals[at], cols[at] = blocks[sels[p]], col0[sels[p]]
     csr = (ptr[0].astype(PETSc.IntType), cols_d, vals_d)
     if comm.size > 1:
@@ -288,8 +286,7 @@ def _box_rows(mesh, lattices):
     """Templates T (27 per box, 3, 27, 3) and P of lattice.templates, and per owned row (ascending global
     vertex) its template id, the global vertex number of each of its 27 neighbour offsets (any
     valid number where P says there is none) and which of them exist (P of its template)."""
-    own = np.flatnonzero(mesh.owned)
-    own = own[np.argsort(mesh.gvert[own])]                   # row r is global vertex v0 + r
+    own = mesh.owned_rows                                    # row r is global vertex v0 + r
     orig = mesh.vert_orig[own].astype(np.int64)
     ends = np.array([b.offset for b in lattices] + [lattices[-1].offset + lattices[-1].n_vertices])
     body = np.searchsorted(ends, orig, side="right") - 1
@@ -344,9 +341,8 @@ def _owned_sums(mesh, pattern, entries, layout, groups, lmbda, mu, last):
             cols[d0:d1].reshape(shape)[...] = (3 * (pattern.col[p0:p1] - v0)).reshape(b - a, 1, w, 1) + np.arange(3)
         odd = np.flatnonzero(~sparsity.covered(runs, r1 - r0, r0)) + r0
         if len(odd):
-            lens = nb[odd]
-            row = np.repeat(odd, lens)
-            p = np.repeat(pattern.rowptr[odd] - np.cumsum(lens) + lens, lens) + np.arange(lens.sum())
+            p, which = sparsity.row_spans(pattern.rowptr, odd)
+            row = odd[which]
             base, stride, col0 = sparsity.block_positions(pattern, layout, p, row, v0)
             pos = sparsity.scatter_points(base, stride)
             vals[pos] = V[p - q0].reshape(-1, 3, 3)
@@ -612,17 +608,29 @@ def symmetry_axis(mesh, index, surface):
     return axis
 
 
+def _centred(comm, x):
+    """Points x (k, 3) of one body spread over comm's ranks, less the body's centroid."""
+    return x - comm.allreduce(x.sum(axis=0), op=MPI.SUM) / max(comm.allreduce(len(x)), 1)
+
+
+def _write_rigid_field(a, rows, k, x):
+    """Rigid motion k (translations along x, y, z, then rotations about z, x, y) at centred points x (k, 3) into
+    rows `rows` of a (n, 3), whose other entries it leaves."""
+    if k < 3:
+        a[rows, k] = 1.0
+    else:
+        i, j = ((0, 1), (1, 2), (2, 0))[k - 3]
+        a[rows, i] = -x[:, j]
+        a[rows, j] = x[:, i]
+
+
 def _rigid_fields(comm, x):
     """The 6 rigid motions at points x (k, 3) of one body spread over comm's ranks, rotations about the body's
-    centre: translations along x, y, z, then rotations about z, x, y; (6, k, 3)."""
-    centre = comm.allreduce(x.sum(axis=0), op=MPI.SUM) / max(comm.allreduce(len(x)), 1)
-    x = x - centre
+    centre: (6, k, 3) in _write_rigid_field's order."""
+    x = _centred(comm, x)
     fields = np.zeros((6, len(x), 3))
-    for k in range(3):
-        fields[k, :, k] = 1.0
-    for k, (i, j) in enumerate(((0, 1), (1, 2), (2, 0))):
-        fields[3 + k, :, i] = -x[:, j]
-        fields[3 + k, :, j] = x[:, i]
+    for k in range(6):
+        _write_rigid_field(fields[k], slice(None), k, x)
     return fields
 
 
@@ -634,33 +642,23 @@ def rigid_body_modes(mesh, template, held=()):
     motion of those vertices far from near-null; left in, smoothed aggregation built coarse spaces
     that fought them (GAMG: 98 Krylov iterations against 49 on two cubes between sticking dies, 70k dofs)."""
     comm = mesh.comm
-    owned_v = np.flatnonzero(mesh.owned)
-    r0 = template.getOwnershipRange()[0]
-    n = template.getLocalSize() // 3
-    vertex_at = np.empty(n, dtype=np.int64)                    # the owned vertex of each vertex row
-    vertex_at[(3 * mesh.gvert[owned_v] - r0) // 3] = owned_v
+    v0 = mesh.vertex_range[0]
     held_rows = []
     for surface, normal in held:
         v = mesh.surface_vertices(surface)
-        held_rows.append(((3 * mesh.gvert[v[mesh.owned[v]]] - r0) // 3, normal))
-    row_body = mesh.vertex_body[vertex_at]
+        held_rows.append((mesh.gvert[v[mesh.owned[v]]] - v0, normal))
+    row_body = mesh.vertex_body[mesh.owned_rows]
     vecs = []
     for b in range(len(mesh.body_names)):
         r = np.flatnonzero(row_body == b)
-        x = mesh.coords[vertex_at[r]]
-        if len(r) == n:
+        x = _centred(comm, mesh.coords[mesh.owned_rows[r]])
+        if len(r) == len(row_body):
             r = slice(None)                # the whole rank's rows: strided writes, not scattered ones
-        x -= comm.allreduce(x.sum(axis=0), op=MPI.SUM) / max(comm.allreduce(len(x)), 1)
         modes = [template.duplicate() for _ in range(6)]
-        for k, v in enumerate(modes):      # translations along x, y, z, then rotations about z, x, y (centroid)
+        for k, v in enumerate(modes):      # about the centroid
             v.set(0.0)
-            a = v.getArray().reshape(-1, 3)            # by vertex row (r0 is a multiple of 3)
-            if k < 3:
-                a[r, k] = 1.0
-            else:
-                i, j = ((0, 1), (1, 2), (2, 0))[k - 3]
-                a[r, i] = -x[:, j]
-                a[r, j] = x[:, i]
+            a = v.getArray().reshape(-1, 3)            # by vertex row
+            _write_rigid_field(a, r, k, x)
             for rows, normal in held_rows:
                 if normal is None:
                     a[rows] = 0.0

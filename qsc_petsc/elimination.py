@@ -10,12 +10,7 @@ the fixed rows themselves. On the 985k-dof box on 2 ranks that pass (40 M entrie
 import numpy as np
 from petsc4py import PETSc
 
-
-def _spans(ptr, rows):
-    """Flat positions of the entries of CSR rows `rows`, and which of `rows` each belongs to."""
-    lens = ptr[rows + 1] - ptr[rows]
-    first = np.repeat(ptr[rows] - np.cumsum(lens) + lens, lens)
-    return first + np.arange(lens.sum()), np.repeat(np.arange(len(rows)), lens)
+from .sparsity import row_spans
 
 
 def eliminate(csr, r0, dofs, values, comm):
@@ -34,13 +29,13 @@ def eliminate(csr, r0, dofs, values, comm):
     ubar = np.zeros(n)
     ubar[rows] = values
     lift = np.zeros(n)
-    at, which = _spans(ptr, rows)
+    at, which = row_spans(ptr, rows)
     near = cols[at] // 3                      # the fixed dofs' vertex neighbours (local vertices)
     vals[at] = 0.0
     vals[at[cols[at] == rows[which]]] = 1.0
     near = (3 * np.unique(near)[:, None] + np.arange(3)).ravel()
     near = near[~fixed[near]]
-    at, which = _spans(ptr, near)
+    at, which = row_spans(ptr, near)
     hit = fixed[cols[at]]
     at, which = at[hit], near[which[hit]]
     lift += np.bincount(which, vals[at] * ubar[cols[at]], minlength=n)
@@ -55,7 +50,7 @@ def _eliminate_remote(part, rows, fixed, ubar, comm):
     other ranks fix (found from their owners by one scatter) zeroed into the lifting."""
     ptr, cols, vals = part
     n = len(ptr) - 1
-    at, _ = _spans(ptr, rows)
+    at, _ = row_spans(ptr, rows)
     vals[at] = 0.0
     # every global column here asks its owner whether it is fixed, and at what value: [flag, ubar] per dof
     state = PETSc.Vec().createMPI((2 * n, PETSc.DECIDE), bsize=2, comm=comm)

@@ -106,6 +106,14 @@ class LocalMesh:
         return np.flatnonzero(self.body_mask(body))
 
     @cached_property
+    def owned_rows(self):
+        """The local vertex of each owned row: row r is global vertex vertex_range[0] + r."""
+        own = np.flatnonzero(self.owned)
+        rows = np.empty(len(own), dtype=np.int64)
+        rows[self.gvert[own] - self.vertex_range[0]] = own
+        return rows
+
+    @cached_property
     def vertex_body(self):
         """Body index of each local vertex (bodies share no vertex; -1 for a vertex in no local cell)."""
         body = np.full(len(self.coords), -1, dtype=self.cell_body.dtype)

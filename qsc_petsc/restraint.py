@@ -73,20 +73,17 @@ class Restraint:
         comm = mesh.comm
         self.comm, self.names = comm, list(mesh.body_names)
         self.mesh, self.sizes = mesh, template.getSizes()
-        self.r0 = template.getOwnershipRange()[0]
-        owned = np.flatnonzero(mesh.owned)
+        owned = mesh.owned_rows              # dof 3 r + c of this rank is component c of vertex owned[r]
         self.frames = []            # per body: the centre [m] and length [m] its rotations are taken with
         for b in range(len(self.names)):
-            x = mesh.coords[owned[mesh.body_mask(b)[owned]]]
+            x = mesh.coords[owned[mesh.vertex_body[owned] == b]]
             lo, hi = np.empty(3), np.empty(3)
             comm.Allreduce(x.min(axis=0) if len(x) else np.full(3, np.inf), lo, op=MPI.MIN)
             comm.Allreduce(x.max(axis=0) if len(x) else np.full(3, -np.inf), hi, op=MPI.MAX)
             self.frames.append((0.5 * (lo + hi), float(np.linalg.norm(hi - lo)) or 1.0))
         # the boundary conditions' rows of the motions: only their vertices' velocities are needed
-        dofs = np.asarray(bc_dofs, dtype=np.int64) - self.r0
-        vertex_at = np.empty(len(owned), dtype=np.int64)        # owned vertex of each vertex row
-        vertex_at[(3 * mesh.gvert[owned] - self.r0) // 3] = owned
-        held = self._velocities(vertex_at[dofs // 3], dofs % 3)
+        dofs = np.asarray(bc_dofs, dtype=np.int64) - template.getOwnershipRange()[0]
+        held = self._velocities(owned[dofs // 3], dofs % 3)
         self.gram_bc = held.T @ held
         self.Rmat = None            # every owned dof's motions, made for the first contact term (_motion_matrix)
         self.seen = weakref.WeakKeyDictionary()        # per term, its rows' motions (_motions): G does not change
@@ -105,11 +102,9 @@ class Restraint:
         """The motions of every owned dof (owned dofs, 6 nb) as one dense Mat: a term's G R is one product, not a
         G.mult per motion (collective the first time)."""
         if self.Rmat is None:
-            mesh = self.mesh
-            owned = np.flatnonzero(mesh.owned)
-            rows = ((3 * mesh.gvert[owned] - self.r0)[:, None] + np.arange(3)).ravel()
-            R = np.empty((len(rows), 6 * len(self.names)), order="F")      # column-major: PETSc's dense layout
-            R[rows] = self._velocities(np.repeat(owned, 3), np.tile(np.arange(3), len(owned)))
+            owned = self.mesh.owned_rows
+            # column-major: PETSc's dense layout
+            R = np.asfortranarray(self._velocities(np.repeat(owned, 3), np.tile(np.arange(3), len(owned))))
             self.Rmat = PETSc.Mat().createDense((self.sizes, (None, R.shape[1])), array=R.ravel(order="F"),
                                                 comm=self.comm)
             self.Rmat.assemble()

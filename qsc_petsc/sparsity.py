@@ -169,6 +169,14 @@ def equal_runs(nb, plain, offset=0):
     return list(zip((start[keep] + offset).tolist(), (end[keep] + offset).tolist()))
 
 
+def row_spans(ptr, rows):
+    """Flat positions of the entries of CSR rows `rows` (row pointers ptr), row after row, and which of `rows`
+    each belongs to."""
+    lens = ptr[rows + 1] - ptr[rows]
+    first = np.repeat(ptr[rows] - np.cumsum(lens) + lens, lens)
+    return first + np.arange(lens.sum()), np.repeat(np.arange(len(rows)), lens)
+
+
 def covered(runs, n, offset=0):
     """Mask (n,) of the rows (minus offset) that runs [(a, b), ...] from equal_runs cover."""
     mask = np.zeros(n, bool)
