@@ -15,6 +15,11 @@ from qsc_petsc.errors import MeshError
 # (fem.gauss_tet(1) is a collapsed rule whose weight is 1/8, not 1/6, so the tet rule is written here.)
 QUADRATURE = {"hex": fem.gauss_hex(2), "tet": (fem.CENTROID["tet"][None, :], np.array([1.0 / 6.0]))}
 
+# a cell whose det J is not above this fraction of its Jacobian's longest column cubed at a quadrature point is flat
+# or inverted (an element stretched 1000:1 stands at 1e-6): a flattened hex's det J came out +4.5e-19 (round-off)
+# and passed a plain det J <= 0 test
+MIN_RELATIVE_DET = 1e-10
+
 CHUNK = 2048  # cells per vectorised batch: temporaries stay in cache (~10 MB for hexes)
 
 # _VOIGT[i, j, k] = 1 where strain component i gets d u_j / d x_k
@@ -42,7 +47,8 @@ def _gradients(cell_type, xe, xi, ids=None, weights=None):
     """Physical shape-function gradients G (m, nq, n, 3) and det J (m, nq) at reference points xi (nq, 3).
 
     With quadrature weights (nq,), G is scaled by sqrt(w det J) so that sum_q G G^T is the
-    integral int G G^T dV. Raises MeshError if det J <= 0, naming the cell ids[row] (default: row).
+    integral int G G^T dV. Raises MeshError if det J is not positive beyond round-off (MIN_RELATIVE_DET), naming
+    the cell ids[row] (default: row).
     """
     _, dN = fem.SHAPE[cell_type](xi)                               # (nq, n, 3) d N_a / d xi_k
     m, n = xe.shape[:2]
@@ -54,11 +60,16 @@ def _gradients(cell_type, xe, xi, ids=None, weights=None):
     cof = [[J[(i + 1) % 3, (k + 1) % 3] * J[(i + 2) % 3, (k + 2) % 3]
             - J[(i + 1) % 3, (k + 2) % 3] * J[(i + 2) % 3, (k + 1) % 3] for k in range(3)] for i in range(3)]
     detJ = J[0, 0] * cof[0][0] + J[0, 1] * cof[0][1] + J[0, 2] * cof[0][2]
-    bad = np.flatnonzero((detJ <= 0.0).any(axis=1))
+    # det J over the cube of the Jacobian's longest column (1 for a cube, 0 flat, < 0 inverted): a flat cell's det J
+    # is round-off of either sign, so det J <= 0 alone lets some through
+    longest = np.maximum.reduce([J[0, k] ** 2 + J[1, k] ** 2 + J[2, k] ** 2 for k in range(3)])
+    relative = detJ / longest ** 1.5
+    bad = np.flatnonzero((~(relative > MIN_RELATIVE_DET)).any(axis=1))
     if len(bad):
         c = bad[0]
         raise MeshError(f"{cell_type} cell {c if ids is None else ids[c]} is inverted or degenerate: "
-                        f"det J = {detJ[c].min():.3g} <= 0 at a quadrature point")
+                        f"det J = {detJ[c].min():.3g} at a quadrature point, {relative[c].min():.3g} relative to "
+                        f"the cell's size (not above {MIN_RELATIVE_DET:g})")
     scale = 1.0 / detJ if weights is None else np.sqrt(weights / detJ)
     # G_ai = dN_ak (J^-1)_ki with J^-1 = cof^T / det J: one (n, 3) x (3, 3m) GEMM per quadrature point
     Jinv = (np.array(cof) * scale).transpose(3, 1, 2, 0).reshape(nq, 3, 3 * m)   # [q, k, (m, i)]

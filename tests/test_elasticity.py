@@ -163,6 +163,22 @@ def test_inverted_cell_raises(cell_type, share):
         el.stiffness(cell_type, xe, LMBDA, MU, share_translates=share)
 
 
+def test_flat_cell_raises_whatever_the_sign_of_its_round_off():
+    """A hex flattened onto its bottom face (0.25 x 1/3 at z = 0.6: det J = +4.5e-19, round-off) and a tet with a
+    vertex moved onto its opposite face shall raise MeshError; a cell stretched 1000:1 shall not."""
+    hexa = np.array([[0, 0], [0.25, 0], [0.25, 1 / 3], [0, 1 / 3]] * 2)
+    flat = np.column_stack([hexa, np.full(8, 0.6)])[None]
+    with pytest.raises(MeshError, match="hex cell 0 is inverted or degenerate"):
+        el.stiffness("hex", flat, LMBDA, MU)
+    tet = np.array([[[0, 0, 0], [1, 0, 0], [0, 1, 0], [0.3, 0.3, 0]]], float)
+    with pytest.raises(MeshError, match="tet cell 0 is inverted or degenerate"):
+        el.stiffness("tet", tet, LMBDA, MU)
+    square = np.array([[0, 0], [1, 0], [1, 1], [0, 1]] * 2, float)
+    long = np.column_stack([1000.0 * square[:, 0], square[:, 1], np.repeat([0.0, 1.0], 4)])[None]
+    K = el.stiffness("hex", long, LMBDA, MU)
+    assert np.isfinite(K).all() and np.allclose(K @ np.tile([1.0, 0, 0], 8), 0, atol=1e-9 * np.abs(K).max())
+
+
 def test_von_mises():
     s = np.array([[-3e6, 0, 0, 0, 0, 0], [0, 0, 2e6, 0, 0, 0], [1e6, 1e6, 1e6, 0, 0, 0], [0, 0, 0, 0, 0, 1e6]])
     assert np.allclose(el.von_mises(s), [3e6, 2e6, 0.0, np.sqrt(3) * 1e6])

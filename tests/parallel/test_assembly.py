@@ -235,7 +235,7 @@ def test_pattern_is_closed(comm):
 
 
 def test_degenerate_cell_fails_every_rank(comm):
-    """A cell with det J <= 0 on one rank shall raise MeshError on all ranks, naming the cell."""
+    """A flat cell (det J round-off, of either sign) on one rank shall raise MeshError on all ranks, naming the cell."""
     from qsc_petsc.errors import MeshError
     scene = load_scene(CONFIGS / "block_compression.toml", ["bodies.0.mesh.cells=[4,3,5]"])
     mesh = distribute_mesh(scene, comm)
