@@ -335,7 +335,7 @@ def distribute_mesh(scene, comm):
                 for ref in (pair.slave, pair.master):
                     bits |= np.int64(1) << np.int64(surface_names.index(ref))
             part = coordinate_bisection(gm.points[gm.cells].mean(axis=1), comm.size,
-                                        contact=(gm.face_mask & bits).any(axis=1))
+                                        contact=(gm.face_mask & bits).any(axis=1), cells=gm.cells)
             sizes, points = np.bincount(part, minlength=comm.size), np.argsort(part, kind="stable")
         else:
             sizes, points = np.zeros(comm.size), np.zeros(0)

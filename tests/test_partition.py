@@ -46,7 +46,7 @@ def test_contact_surfaces_are_cut_across():
     x, contact = stacked_boxes()
     part = coordinate_bisection(x, 2, contact)
     assert np.bincount(part).tolist() == [64, 64]
-    assert x[part == 0, 0].max() < x[part == 1, 0].min()
+    assert x[part == 0, 0].max() <= x[part == 1, 0].min()
     assert np.bincount(part[contact]).tolist() == [16, 16]
     assert coordinate_bisection(x, 2).tolist() == coordinate_bisection(x, 2, np.zeros(len(x), bool)).tolist()
 
@@ -64,3 +64,47 @@ def test_contact_cuts_stop_at_the_aspect_limit():
         part = coordinate_bisection(column, 2, at)
         axis = 0 if across else 2
         assert column[part == 0, axis].max() < column[part == 1, axis].min()
+
+
+def box_cells(nx, ny, nz):
+    """Hex vertex ids (x fastest) of the box_centroids cells."""
+    z, y, x = np.meshgrid(np.arange(nz), np.arange(ny), np.arange(nx), indexing="ij")
+    base = ((z * (ny + 1) + y) * (nx + 1) + x).ravel()
+    corners = [((c >> 2) * (ny + 1) + ((c >> 1) & 1)) * (nx + 1) + (c & 1) for c in range(8)]
+    return base[:, None] + np.array(corners)
+
+
+def owned_vertices(cells, part):
+    """Vertices per part when each goes to the highest part among its cells, as DMPlex distributes them."""
+    owner = np.full(cells.max() + 1, -1)
+    np.maximum.at(owner, cells.ravel(), np.repeat(part, cells.shape[1]))
+    return np.bincount(owner).tolist()
+
+
+def test_cuts_balance_owned_vertices():
+    """Given the cells' vertices, a 5 x 5 x 5 box (6 x 6 x 6 vertices) is cut so that each part owns the same number
+    of vertices: into 2 parts between cell layers (75 and 50 cells, 108 vertices each), not mid-layer into equal
+    cell counts that leave the higher part the cut's vertices (130 against 86); into 3 parts, 72 each."""
+    x, cells = box_centroids(5, 5, 5), box_cells(5, 5, 5)
+    assert owned_vertices(cells, coordinate_bisection(x, 2)) == [86, 130]
+    part = coordinate_bisection(x, 2, cells=cells)
+    assert owned_vertices(cells, part) == [108, 108]
+    assert np.bincount(part).tolist() == [75, 50]
+    assert x[part == 0, 0].max() < x[part == 1, 0].min()
+    assert owned_vertices(cells, coordinate_bisection(x, 3, cells=cells)) == [72, 72, 72]
+
+
+def test_balanced_cuts_through_unequal_meshes():
+    """Two boxes in contact, one with twice the cells per direction, cut across the interface into 2 and 3
+    parts: each part owns the nearest to an equal share of the vertices (within one cell's worth), and half the
+    contact cells of each body fall on either side of the first cut."""
+    coarse, fine = box_centroids(4, 4, 4), box_centroids(8, 8, 8) / 2 + [0, 0, 4]
+    x = np.concatenate([coarse, fine])
+    cells = np.concatenate([box_cells(4, 4, 4), box_cells(8, 8, 8) + 125])
+    contact = np.concatenate([coarse[:, 2] > 3, fine[:, 2] < 4.5])
+    for n_parts in (2, 3):
+        part = coordinate_bisection(x, n_parts, contact, cells)
+        owned = owned_vertices(cells, part)
+        assert max(owned) - min(owned) <= 8, owned
+    part = coordinate_bisection(x, 2, contact, cells)
+    assert x[part == 0, 0].max() <= x[part == 1, 0].min()
