@@ -66,7 +66,17 @@ def _stiffness_operator(size, csr, comm, r0, fixed):
     over: block size 3, no new nonzeros, the plain row kernel. fixed: None, or (owned dofs, values) whose rows
     and columns are taken out first (elimination.py): then (K0, lifting)."""
     lift = None if fixed is None else elimination.eliminate(csr, r0, *fixed, comm)
-    A = PETSc.Mat().createAIJWithArrays(size, csr, comm=comm)
+    opts = PETSc.Options()
+    # createAIJWithArrays assembles at once, and the assembly scans every row for i-nodes (rows of one pattern)
+    # unless -mat_no_inode is in the database when the matrix is made: plain_rows turns them off anyway
+    scan = opts.hasName("mat_no_inode")
+    if not scan:
+        opts.setValue("mat_no_inode", True)
+    try:
+        A = PETSc.Mat().createAIJWithArrays(size, csr, comm=comm)
+    finally:
+        if not scan:
+            opts.delValue("mat_no_inode")
     A.setBlockSizes(3, 3)          # createAIJWithArrays ignores bsize; GAMG aggregates by it
     A.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, True)
     plain_rows(A)
@@ -204,14 +214,18 @@ def lattice_stiffness_matrix(mesh, lattices, extra=None, fixed=None):
     trip = np.arange(3, dtype=PETSc.IntType)
     present = [T[t][:, P[t]].ravel() for t in range(len(T))]      # a natural row's values: its template's blocks
     step = 3 * np.arange(max((b - a for a, b in runs), default=0), dtype=PETSc.IntType)[:, None]
-    for a, b in runs:
-        t = tid[a]
-        nb, p0, p1 = len(blocks_of[t]), ptr[0][3 * a], ptr[0][3 * b]
-        vals_d[p0:p1].reshape(b - a, -1)[:] = present[t]
-        first = (3 * (gcol[a, blocks_of[t]] - v0)).astype(PETSc.IntType)[None, :, None] + trip
-        # a run's rows are consecutive vertices whose neighbours are all owned: each row's columns are the
-        # previous row's plus 3 (one add over whole rows)
-        np.add(np.broadcast_to(first, (3, nb, 3)).ravel(), step[:b - a], out=cols_d[p0:p1].reshape(b - a, -1))
+    heads = np.array([a for a, _ in runs], np.int64)
+    for t in np.unique(tid[heads]):                # the runs of one template: their first rows' columns at once
+        which = np.flatnonzero(tid[heads] == t)
+        nb = len(blocks_of[t])
+        first = (3 * (gcol[heads[which][:, None], blocks_of[t]] - v0)).astype(PETSc.IntType)
+        first = np.broadcast_to(first[:, None, :, None] + trip, (len(which), 3, nb, 3)).reshape(len(which), -1)
+        for (a, b), head in zip((runs[i] for i in which), first):
+            p0, p1 = ptr[0][3 * a], ptr[0][3 * b]
+            vals_d[p0:p1].reshape(b - a, -1)[:] = present[t]
+            # a run's rows are consecutive vertices whose neighbours are all owned: each row's columns are the
+            # previous row's plus 3 (one add over whole rows)
+            np.add(head, step[:b - a], out=cols_d[p0:p1].reshape(b - a, -1))
     for t in np.unique(tid[lone]):               # natural rows alone: template by template
         rows = lone[tid[lone] == t]
         nb = len(blocks_of[t])
