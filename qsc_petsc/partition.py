@@ -38,9 +38,12 @@ def coordinate_bisection(centroids, n_parts, contact=None, cells=None):
 
 def cut_axis(pts, on_contact):
     """The axis a set of cells (centroids pts) is cut across: the one along which its contact cells spread
-    most, if the cells' extent along it is at least 1 / SPLIT_ASPECT of their largest; else the widest."""
+    most, if the cells' extent along it is at least 1 / SPLIT_ASPECT of their largest; else the widest, the last of
+    equal ones: generated boxes number x fastest, so a cube cut across z leaves each part whole lines of vertices
+    (the box stencils' runs of template rows: 98k-dof cube, 2 ranks, 480 runs of 30 rows per rank instead of 1024 of
+    14, assembly 0.053-0.054 -> 0.051-0.053 s)."""
     extent = pts.max(axis=0) - pts.min(axis=0)
-    axis = int(np.argmax(extent))
+    axis = 2 - int(np.argmax(extent[::-1]))
     touching = pts[on_contact]
     if len(touching) > 1:
         spread = touching.max(axis=0) - touching.min(axis=0)
