@@ -30,10 +30,11 @@ def eliminate(csr, r0, dofs, values, comm):
     ubar[rows] = values
     lift = np.zeros(n)
     at, which = row_spans(ptr, rows)
-    near = cols[at] // 3                      # the fixed dofs' vertex neighbours (local vertices)
+    near = np.zeros(n // 3, bool)             # the fixed dofs' vertex neighbours (local vertices)
+    near[cols[at] // 3] = True
     vals[at] = 0.0
     vals[at[cols[at] == rows[which]]] = 1.0
-    near = (3 * np.unique(near)[:, None] + np.arange(3)).ravel()
+    near = (3 * np.flatnonzero(near)[:, None] + np.arange(3)).ravel()
     near = near[~fixed[near]]
     at, which = row_spans(ptr, near)
     hit = fixed[cols[at]]
