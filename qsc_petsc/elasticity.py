@@ -63,7 +63,8 @@ def _gradients(cell_type, xe, xi, ids=None, weights=None):
     # det J over the cube of the Jacobian's longest column (1 for a cube, 0 flat, < 0 inverted): a flat cell's det J
     # is round-off of either sign, so det J <= 0 alone lets some through
     longest = np.maximum.reduce([J[0, k] ** 2 + J[1, k] ** 2 + J[2, k] ** 2 for k in range(3)])
-    relative = detJ / longest ** 1.5
+    with np.errstate(divide="ignore", invalid="ignore"):        # a cell collapsed to a point: NaN, caught below
+        relative = detJ / longest ** 1.5
     bad = np.flatnonzero((~(relative > MIN_RELATIVE_DET)).any(axis=1))
     if len(bad):
         c = bad[0]

@@ -1,5 +1,7 @@
 """Tests of the linear elasticity element kernels: energy derivatives, rigid modes, patch tests, fast path."""
 
+import warnings
+
 import numpy as np
 import pytest
 
@@ -165,7 +167,8 @@ def test_inverted_cell_raises(cell_type, share):
 
 def test_flat_cell_raises_whatever_the_sign_of_its_round_off():
     """A hex flattened onto its bottom face (0.25 x 1/3 at z = 0.6: det J = +4.5e-19, round-off) and a tet with a
-    vertex moved onto its opposite face shall raise MeshError; a cell stretched 1000:1 shall not."""
+    vertex moved onto its opposite face shall raise MeshError, as a hex collapsed to a point shall (without a NumPy
+    warning first); a cell stretched 1000:1 shall not."""
     hexa = np.array([[0, 0], [0.25, 0], [0.25, 1 / 3], [0, 1 / 3]] * 2)
     flat = np.column_stack([hexa, np.full(8, 0.6)])[None]
     with pytest.raises(MeshError, match="hex cell 0 is inverted or degenerate"):
@@ -173,6 +176,10 @@ def test_flat_cell_raises_whatever_the_sign_of_its_round_off():
     tet = np.array([[[0, 0, 0], [1, 0, 0], [0, 1, 0], [0.3, 0.3, 0]]], float)
     with pytest.raises(MeshError, match="tet cell 0 is inverted or degenerate"):
         el.stiffness("tet", tet, LMBDA, MU)
+    with warnings.catch_warnings():                  # a cell collapsed to a point: the error, not a NumPy warning
+        warnings.simplefilter("error")
+        with pytest.raises(MeshError, match="hex cell 0 is inverted or degenerate"):
+            el.stiffness("hex", np.ones((1, 8, 3)), LMBDA, MU)
     square = np.array([[0, 0], [1, 0], [1, 1], [0, 1]] * 2, float)
     long = np.column_stack([1000.0 * square[:, 0], square[:, 1], np.repeat([0.0, 1.0], 4)])[None]
     K = el.stiffness("hex", long, LMBDA, MU)
