@@ -466,14 +466,19 @@ def _rank_in_row(pattern, row, cols):
     return t
 
 
-def internal_force(mesh, u_local, lmbda, mu):
+def internal_force(mesh, u_local, lmbda, mu, which=None):
     """Element-by-element K u (local, ghosted dof array): reactions need K before constraints.
 
-    Cells in few congruent groups (generated boxes) take one product per group with the group's
-    stiffness; other meshes go chunk by chunk with every cell's own."""
-    m, k = mesh.cells.shape
-    ue = u_local.reshape(-1, 3)[mesh.cells].reshape(m, 3 * k)
-    xe = mesh.coords[mesh.cells]
+    which: None, every local cell; or the indices of the cells to sum, so that the entries of a vertex all of
+    whose local cells are among them are K u's (the others partial). Cells in few congruent groups (generated
+    boxes) take one product per group with the group's stiffness; other meshes go chunk by chunk with every
+    cell's own."""
+    cells = mesh.cells if which is None else mesh.cells[which]
+    if which is not None:
+        lmbda, mu = lmbda[which], mu[which]
+    m, k = cells.shape
+    ue = u_local.reshape(-1, 3)[cells].reshape(m, 3 * k)
+    xe = mesh.coords[cells]
     first, group = elasticity.congruent_groups(xe, lmbda, mu) if m else (np.zeros(0, np.int64),) * 2
     fe = np.empty_like(ue)
     if len(first) <= FEW_GROUPS:
@@ -489,7 +494,7 @@ def internal_force(mesh, u_local, lmbda, mu):
             c = slice(s, s + CHUNK)
             Kc = elasticity.stiffness(mesh.cell_type, xe[c], lmbda[c], mu[c], share_translates=share)
             fe[c] = np.einsum("mij,mj->mi", Kc, ue[c])
-    ldofs = 3 * mesh.cells[:, :, None] + np.arange(3)
+    ldofs = 3 * cells[:, :, None] + np.arange(3)
     return np.bincount(ldofs.ravel(), fe.ravel(), minlength=3 * len(mesh.coords))
 
 

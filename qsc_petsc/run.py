@@ -126,6 +126,7 @@ class Run:
         self.out = prepare_output(scene, out_dir, comm)
         self.from_scene = options.insert_options(scene.petsc)
         self.destroyed = False
+        self.reaction_cells = None        # the cells at the constrained surfaces' vertices (reactions), made once
         try:
             self._build(scene, comm)
         except BaseException:
@@ -197,12 +198,23 @@ class Run:
         return self.mesh.local_vectors(u)
 
     def reactions(self, u, t):
-        """Net force [N] that each displacement/symmetry boundary exerts on the body (its constrained components)."""
+        """Net force [N] that each displacement/symmetry boundary exerts on the body (its constrained components).
+
+        K u - f is read on the constrained dofs only, so the element forces are summed over the cells at their
+        surfaces' vertices (985k-dof box, 2 ranks: 0.25-0.34 s over every cell); none without such boundaries."""
         mesh = self.mesh
         dm = mesh.dm
+        held = [(i, bc) for i, bc in enumerate(self.scene.boundary) if bc.type != "pressure"]
+        if not held:
+            return {}
+        if self.reaction_cells is None:
+            at = np.zeros(len(mesh.coords), bool)
+            for _, bc in held:
+                at[mesh.surface_vertices(bc.surface)] = True
+            self.reaction_cells = np.flatnonzero(at[mesh.cells].any(axis=1))
         ul = self.local_displacement(u).ravel()
         fl = dm.createLocalVec()
-        fl.getArray()[:] = assembly.internal_force(mesh, ul, self.lmbda, self.mu)
+        fl.getArray()[:] = assembly.internal_force(mesh, ul, self.lmbda, self.mu, self.reaction_cells)
         r = u.duplicate()
         r.set(0.0)
         dm.localToGlobal(fl, r, addv=PETSc.InsertMode.ADD_VALUES)
@@ -212,9 +224,7 @@ class Run:
         rarr = r.getArray()
         r0 = u.getOwnershipRange()[0]
         out = {}
-        for i, bc in enumerate(self.scene.boundary):
-            if bc.type == "pressure":
-                continue
+        for i, bc in held:
             # only the components this boundary holds: on an edge shared with another boundary the
             # other components are that boundary's reaction
             dofs = self.bc_per_boundary[i]
