@@ -18,7 +18,7 @@ from . import fem
 from .errors import MeshError, QscError, SceneError
 from .meshgen import box_mesh, read_mesh_file
 from .options import option_value
-from .partition import coordinate_bisection
+from .partition import cell_centroids, coordinate_bisection
 
 MAX_SURFACES = 62          # face membership travels as one int64 bitmask per cell face
 
@@ -310,8 +310,11 @@ def distribute_mesh(scene, comm):
         for b in range(len(scene.bodies)):
             ids = np.flatnonzero(gm.cell_body == b).astype(PETSc.IntType) + c0
             body_label.setStratumIS(b, PETSc.IS().createGeneral(ids, comm=PETSc.COMM_SELF))
+        faced = np.flatnonzero(gm.face_mask.any(axis=1))        # the cells with a face on a named surface
+        masks = gm.face_mask[faced]
         for bit, name in enumerate(surface_names):
-            c, f = np.nonzero(gm.face_mask & (np.int64(1) << np.int64(bit)))
+            c, f = np.nonzero(masks & (np.int64(1) << np.int64(bit)))
+            c = faced[c]
             verts = np.unique(fem.cell_faces(cell_type, gm.cells[c], f)).astype(PETSc.IntType) + v0
             dm.getLabel(name).setStratumIS(1, PETSc.IS().createGeneral(verts, comm=PETSc.COMM_SELF))
 
@@ -334,7 +337,7 @@ def distribute_mesh(scene, comm):
             for pair in scene.contact:
                 for ref in (pair.slave, pair.master):
                     bits |= np.int64(1) << np.int64(surface_names.index(ref))
-            part = coordinate_bisection(gm.points[gm.cells].mean(axis=1), comm.size,
+            part = coordinate_bisection(cell_centroids(gm.points, gm.cells), comm.size,
                                         contact=(gm.face_mask & bits).any(axis=1), cells=gm.cells)
             sizes, points = np.bincount(part, minlength=comm.size), np.argsort(part, kind="stable")
         else:

@@ -108,3 +108,13 @@ def test_balanced_cuts_through_unequal_meshes():
         assert max(owned) - min(owned) <= 8, owned
     part = coordinate_bisection(x, 2, contact, cells)
     assert x[part == 0, 0].max() <= x[part == 1, 0].min()
+
+
+def test_cell_centroids():
+    """cell_centroids sums vertex columns one at a time: the same centroids as the mean of each cell's points."""
+    from qsc_petsc.partition import cell_centroids
+    rng = np.random.default_rng(3)
+    points = rng.random((60, 3))
+    for k in (4, 8):
+        cells = rng.integers(0, 60, (40, k))
+        assert np.allclose(cell_centroids(points, cells), points[cells].mean(axis=1), rtol=0, atol=1e-15)
