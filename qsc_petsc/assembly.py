@@ -194,7 +194,14 @@ def lattice_stiffness_matrix(mesh, lattices, extra=None, fixed=None):
     # the other rows, the widened ones with their extra blocks: (rows, offset index, part, global column, entry
     # mask (bit 3 i + k) of each of their blocks)
     wide = widened[odd]
-    groups = [(odd[~wide], d[~wide], part[~wide], ocol[~wide], None)]
+    # runs of the other rows: consecutive rows of one template whose blocks sort alike and whose columns all step by
+    # one vertex, e.g. along a cut (its neighbours on either side are numbered along the line): written like the
+    # natural runs, part by part
+    plain = np.flatnonzero(~wide)
+    split = _split_runs(odd[plain], tid[odd[plain]], d[plain], part[plain], ocol[plain])
+    rest = plain[~sparsity.covered(split, len(plain))]
+    split_blocks = (d, part, ocol)           # the other rows' sorted blocks, for the split runs' first rows
+    groups = [(odd[rest], d[rest], part[rest], ocol[rest], None)]
     if wide.any():
         groups.append((odd[wide], *_widen_rows(key[wide], odd[wide] + v0, extra, v0, v1)))
     masks = []                  # per group and part: which of its (rows, 3, w, 3) entries it holds
@@ -213,7 +220,7 @@ def lattice_stiffness_matrix(mesh, lattices, extra=None, fixed=None):
     vals_o, cols_o = np.empty(ptr[1][-1]), np.empty(ptr[1][-1], PETSc.IntType)
     trip = np.arange(3, dtype=PETSc.IntType)
     present = [T[t][:, P[t]].ravel() for t in range(len(T))]      # a natural row's values: its template's blocks
-    step = 3 * np.arange(max((b - a for a, b in runs), default=0), dtype=PETSc.IntType)[:, None]
+    step = 3 * np.arange(max((b - a for a, b in runs + split), default=0), dtype=PETSc.IntType)[:, None]
     heads = np.array([a for a, _ in runs], np.int64)
     for t in np.unique(tid[heads]):                # the runs of one template: their first rows' columns at once
         which = np.flatnonzero(tid[heads] == t)
@@ -226,6 +233,17 @@ def lattice_stiffness_matrix(mesh, lattices, extra=None, fixed=None):
             # a run's rows are consecutive vertices whose neighbours are all owned: each row's columns are the
             # previous row's plus 3 (one add over whole rows)
             np.add(head, step[:b - a], out=cols_d[p0:p1].reshape(b - a, -1))
+    for i0, i1 in split:
+        j, a, r = plain[i0], odd[plain[i0]], i1 - i0
+        bd, bpart, bcol = (x[j] for x in split_blocks)
+        for p, vals, cols in ((0, vals_d, cols_d), (1, vals_o, cols_o)):
+            sel = bpart == p
+            if not sel.any():
+                continue
+            head = (3 * (bcol[sel] - (v0 if p == 0 else 0))).astype(PETSc.IntType)[:, None] + trip
+            p0, p1 = ptr[p][3 * a], ptr[p][3 * (a + r)]
+            vals[p0:p1].reshape(r, -1)[:] = T[tid[a]][:, bd[sel], :].ravel()
+            np.add(np.broadcast_to(head, (3,) + head.shape).ravel(), step[:r], out=cols[p0:p1].reshape(r, -1))
     for t in np.unique(tid[lone]):               # natural rows alone: template by template
         rows = lone[tid[lone] == t]
         nb = len(blocks_of[t])
@@ -251,6 +269,20 @@ def lattice_stiffness_matrix(mesh, lattices, extra=None, fixed=None):
 
 # lattice_stiffness_matrix's sort keys: part (0 diagonal, 1 off-diagonal, 2 absent) | global column | offset index
 _IDX_BITS, _PART_SHIFT = 5, 60
+
+
+def _split_runs(rows, tid, d, part, ocol):
+    """Runs [(i0, i1), ...] (at least MIN_RUN long) of the rows (ascending) whose every next row is the row after
+    it, of the same template, with its blocks in the same sorted order (d: offset index, part) and each present
+    block's global column one more (ocol): the first row's layout then holds for the whole run, shifted."""
+    if len(rows) < 2:
+        return []
+    same = ((rows[1:] == rows[:-1] + 1) & (tid[1:] == tid[:-1]) & (d[1:] == d[:-1]).all(axis=1)
+            & (part[1:] == part[:-1]).all(axis=1) & ((ocol[1:] == ocol[:-1] + 1) | (part[1:] == 2)).all(axis=1))
+    start = np.flatnonzero(np.r_[True, ~same])
+    end = np.append(start[1:], len(rows))
+    keep = end - start >= sparsity.MIN_RUN
+    return list(zip(start[keep].tolist(), end[keep].tolist()))
 
 
 def _unkey(key, idx_bits=_IDX_BITS):

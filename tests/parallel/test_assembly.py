@@ -97,6 +97,7 @@ LATTICE_CASES = {
                                                                   "bodies.0.mesh.size=[2.0,0.3,1.0]"]),
     "hex box": ("block_compression.toml", ["bodies.0.mesh.cells=[4,3,5]"]),
     "lines long enough for runs, planes of them": ("block_compression.toml", ["bodies.0.mesh.cells=[9,6,5]"]),
+    "cut across z: the cut's rows in runs": ("block_compression.toml", ["bodies.0.mesh.cells=[9,4,27]"]),
     "two bodies, one rotated and stiffer": ("two_cubes_dies.toml", TWO_BODIES),
 }
 
@@ -247,3 +248,22 @@ def test_degenerate_cell_fails_every_rank(comm):
         mesh.coords[v[4:], 2] = mesh.coords[v[0], 2]
     with pytest.raises(MeshError, match=f"hex cell {bad} "):
         assembly.stiffness_matrix(mesh, *assembly.cell_materials(mesh, scene))
+
+
+def test_cut_rows_go_by_runs(comm, monkeypatch):
+    """A tall box (9 x 4 x 27 cells), cut across z on 2 and 3 ranks, puts rows beside a cut (neighbours on another
+    rank) in runs along x, which lattice_stiffness_matrix writes like its natural runs
+    (test_box_stencils_equal_dense_assembly checks the values)."""
+    found = []
+    split_runs = assembly._split_runs
+
+    def spy(*args):
+        runs = split_runs(*args)
+        found.extend(runs)
+        return runs
+    monkeypatch.setattr(assembly, "_split_runs", spy)
+    scene = load_scene(CONFIGS / "block_compression.toml", ["bodies.0.mesh.cells=[9,4,27]"])
+    mesh = distribute_mesh(scene, comm)
+    assembly.lattice_stiffness_matrix(mesh, lattice.box_lattices(scene)).destroy()
+    covered = comm.allreduce(sum(b - a for a, b in found), op=MPI.SUM)
+    assert (covered > 0) == (comm.size > 1)                      # one rank has no cut
