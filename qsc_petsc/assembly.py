@@ -200,12 +200,11 @@ def lattice_stiffness_matrix(mesh, lattices, extra=None, fixed=None):
     plain = np.flatnonzero(~wide)
     split = _split_runs(odd[plain], tid[odd[plain]], d[plain], part[plain], ocol[plain])
     rest = plain[~sparsity.covered(split, len(plain))]
-    split_blocks = (d, part, ocol)           # the other rows' sorted blocks, for the split runs' first rows
     groups = [(odd[rest], d[rest], part[rest], ocol[rest], None)]
     if wide.any():
         groups.append((odd[wide], *_widen_rows(key[wide], odd[wide] + v0, extra, v0, v1)))
     masks = []                  # per group and part: which of its (rows, 3, w, 3) entries it holds
-    for rows, od, opart, ocol, bits in groups:
+    for rows, od, opart, _, bits in groups:
         masks.append([])
         held = None if bits is None else ((bits[:, None, :, None] >> (3 * np.arange(3)[:, None, None] + np.arange(3)))
                                           & 1) > 0
@@ -228,22 +227,16 @@ def lattice_stiffness_matrix(mesh, lattices, extra=None, fixed=None):
         first = (3 * (gcol[heads[which][:, None], blocks_of[t]] - v0)).astype(PETSc.IntType)
         first = np.broadcast_to(first[:, None, :, None] + trip, (len(which), 3, nb, 3)).reshape(len(which), -1)
         for (a, b), head in zip((runs[i] for i in which), first):
-            p0, p1 = ptr[0][3 * a], ptr[0][3 * b]
-            vals_d[p0:p1].reshape(b - a, -1)[:] = present[t]
-            # a run's rows are consecutive vertices whose neighbours are all owned: each row's columns are the
-            # previous row's plus 3 (one add over whole rows)
-            np.add(head, step[:b - a], out=cols_d[p0:p1].reshape(b - a, -1))
+            _fill_run(vals_d, cols_d, ptr[0], a, b, present[t], head, step)
     for i0, i1 in split:
-        j, a, r = plain[i0], odd[plain[i0]], i1 - i0
-        bd, bpart, bcol = (x[j] for x in split_blocks)
+        j = plain[i0]
+        a = odd[j]
         for p, vals, cols in ((0, vals_d, cols_d), (1, vals_o, cols_o)):
-            sel = bpart == p
-            if not sel.any():
-                continue
-            head = (3 * (bcol[sel] - (v0 if p == 0 else 0))).astype(PETSc.IntType)[:, None] + trip
-            p0, p1 = ptr[p][3 * a], ptr[p][3 * (a + r)]
-            vals[p0:p1].reshape(r, -1)[:] = T[tid[a]][:, bd[sel], :].ravel()
-            np.add(np.broadcast_to(head, (3,) + head.shape).ravel(), step[:r], out=cols[p0:p1].reshape(r, -1))
+            sel = part[j] == p
+            if sel.any():
+                head = (3 * (ocol[j, sel] - (v0 if p == 0 else 0))).astype(PETSc.IntType)[:, None] + trip
+                _fill_run(vals, cols, ptr[p], a, a + i1 - i0, T[tid[a]][:, d[j, sel], :].ravel(),
+                          np.broadcast_to(head, (3,) + head.shape).ravel(), step)
     for t in np.unique(tid[lone]):               # natural rows alone: template by template
         rows = lone[tid[lone] == t]
         nb = len(blocks_of[t])
@@ -251,11 +244,11 @@ def lattice_stiffness_matrix(mesh, lattices, extra=None, fixed=None):
         vals_d[at] = present[t]
         first = (3 * (gcol[rows[:, None], blocks_of[t]] - v0))[:, None, :, None] + trip
         cols_d[at] = np.broadcast_to(first, (len(rows), 3, nb, 3)).reshape(len(rows), -1)
-    for (rows, od, opart, ocol, _), sels in zip(groups, masks):
+    for (rows, od, opart, ocols, _), sels in zip(groups, masks):
         blocks = T[tid[rows, None, None], np.arange(3)[:, None], np.minimum(od, 26)[:, None, :]]    # (rows, 3, w, 3)
         if od.shape[1] > 27:
             blocks[np.broadcast_to(od[:, None, :, None] >= 27, blocks.shape)] = 0.0      # extra blocks hold 0
-        col0 = np.where(opart == 0, 3 * (ocol - v0), 3 * ocol).astype(PETSc.IntType)[:, None, :, None] + trip
+        col0 = np.where(opart == 0, 3 * (ocols - v0), 3 * ocols).astype(PETSc.IntType)[:, None, :, None] + trip
         col0 = np.broadcast_to(col0, blocks.shape)
         for p, vals, cols in ((0, vals_d, cols_d), (1, vals_o, cols_o)):
             at, _ = sparsity.row_spans(ptr[p], (3 * rows[:, None] + np.arange(3)).ravel())
@@ -275,14 +268,20 @@ def _split_runs(rows, tid, d, part, ocol):
     """Runs [(i0, i1), ...] (at least MIN_RUN long) of the rows (ascending) whose every next row is the row after
     it, of the same template, with its blocks in the same sorted order (d: offset index, part) and each present
     block's global column one more (ocol): the first row's layout then holds for the whole run, shifted."""
-    if len(rows) < 2:
+    if len(rows) == 0:
         return []
-    same = ((rows[1:] == rows[:-1] + 1) & (tid[1:] == tid[:-1]) & (d[1:] == d[:-1]).all(axis=1)
-            & (part[1:] == part[:-1]).all(axis=1) & ((ocol[1:] == ocol[:-1] + 1) | (part[1:] == 2)).all(axis=1))
-    start = np.flatnonzero(np.r_[True, ~same])
-    end = np.append(start[1:], len(rows))
-    keep = end - start >= sparsity.MIN_RUN
-    return list(zip(start[keep].tolist(), end[keep].tolist()))
+    return sparsity.continued_runs(
+        (rows[1:] == rows[:-1] + 1) & (tid[1:] == tid[:-1]) & (d[1:] == d[:-1]).all(axis=1)
+        & (part[1:] == part[:-1]).all(axis=1) & ((ocol[1:] == ocol[:-1] + 1) | (part[1:] == 2)).all(axis=1))
+
+
+def _fill_run(vals, cols, ptr, a, b, row_values, head, step):
+    """Vertex rows a..b of one CSR part (point-row pointers ptr) that all hold row_values, with the columns head in
+    the first and 3 more per row after it (step: 3 * arange as a column): a run's rows are consecutive vertices
+    whose neighbours are numbered consecutively too. One broadcast and one add over whole rows."""
+    p0, p1 = ptr[3 * a], ptr[3 * b]
+    vals[p0:p1].reshape(b - a, -1)[:] = row_values
+    np.add(head, step[:b - a], out=cols[p0:p1].reshape(b - a, -1))
 
 
 def _unkey(key, idx_bits=_IDX_BITS):

@@ -5,6 +5,7 @@ import resource
 import time
 import weakref
 from contextlib import contextmanager
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -126,7 +127,6 @@ class Run:
         self.out = prepare_output(scene, out_dir, comm)
         self.from_scene = options.insert_options(scene.petsc)
         self.destroyed = False
-        self.reaction_cells = None        # the cells at the constrained surfaces' vertices (reactions), made once
         try:
             self._build(scene, comm)
         except BaseException:
@@ -197,6 +197,15 @@ class Run:
         """Ghosted local displacement array (nv, 3) from the global Vec."""
         return self.mesh.local_vectors(u)
 
+    @cached_property
+    def reaction_cells(self):
+        """The local cells at a displacement or symmetry surface's vertices, whose element forces the reactions sum."""
+        at = np.zeros(len(self.mesh.coords), bool)
+        for bc in self.scene.boundary:
+            if bc.type != "pressure":
+                at[self.mesh.surface_vertices(bc.surface)] = True
+        return np.flatnonzero(at[self.mesh.cells].any(axis=1))
+
     def reactions(self, u, t):
         """Net force [N] that each displacement/symmetry boundary exerts on the body (its constrained components).
 
@@ -207,11 +216,6 @@ class Run:
         held = [(i, bc) for i, bc in enumerate(self.scene.boundary) if bc.type != "pressure"]
         if not held:
             return {}
-        if self.reaction_cells is None:
-            at = np.zeros(len(mesh.coords), bool)
-            for _, bc in held:
-                at[mesh.surface_vertices(bc.surface)] = True
-            self.reaction_cells = np.flatnonzero(at[mesh.cells].any(axis=1))
         ul = self.local_displacement(u).ravel()
         fl = dm.createLocalVec()
         fl.getArray()[:] = assembly.internal_force(mesh, ul, self.lmbda, self.mu, self.reaction_cells)

@@ -161,12 +161,21 @@ def row_batches(cptr, size):
 
 def equal_runs(nb, plain, offset=0):
     """Maximal runs [(a, b), ...] (plus offset) of at least MIN_RUN consecutive plain rows with equal nb."""
-    if len(nb) == 0:
+    return continued_runs((nb[1:] == nb[:-1]) & (plain[1:] == plain[:-1]), plain, offset)
+
+
+def continued_runs(same, keep=None, offset=0):
+    """Maximal runs [(a, b), ...] (plus offset) of at least MIN_RUN rows, each row after a run's first continuing
+    the one before it (same: (n - 1,) bool), and, given keep (n,), only those whose first row it marks."""
+    n = len(same) + 1 if keep is None else len(keep)
+    if n == 0:
         return []
-    start = np.flatnonzero(np.r_[True, (nb[1:] != nb[:-1]) | (plain[1:] != plain[:-1])])
-    end = np.append(start[1:], len(nb))
-    keep = plain[start] & (end - start >= MIN_RUN)
-    return list(zip((start[keep] + offset).tolist(), (end[keep] + offset).tolist()))
+    start = np.flatnonzero(np.r_[True, ~same])
+    end = np.append(start[1:], n)
+    long = end - start >= MIN_RUN
+    if keep is not None:
+        long &= keep[start]
+    return list(zip((start[long] + offset).tolist(), (end[long] + offset).tolist()))
 
 
 def row_spans(ptr, rows):
