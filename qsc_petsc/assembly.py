@@ -663,27 +663,6 @@ def _centred(comm, x):
     return x - comm.allreduce(x.sum(axis=0), op=MPI.SUM) / max(comm.allreduce(len(x)), 1)
 
 
-def _write_rigid_field(a, rows, k, x):
-    """Rigid motion k (translations along x, y, z, then rotations about z, x, y) at centred points x (k, 3) into
-    rows `rows` of a (n, 3), whose other entries it leaves."""
-    if k < 3:
-        a[rows, k] = 1.0
-    else:
-        i, j = ((0, 1), (1, 2), (2, 0))[k - 3]
-        a[rows, i] = -x[:, j]
-        a[rows, j] = x[:, i]
-
-
-def _rigid_fields(comm, x):
-    """The 6 rigid motions at points x (k, 3) of one body spread over comm's ranks, rotations about the body's
-    centre: (6, k, 3) in _write_rigid_field's order."""
-    x = _centred(comm, x)
-    fields = np.zeros((6, len(x), 3))
-    for k in range(6):
-        _write_rigid_field(fields[k], slice(None), k, x)
-    return fields
-
-
 def rigid_body_modes(mesh, template, held=()):
     """Near-nullspace: the 6 rigid-body modes of every body, each supported on its own body only.
 
@@ -708,7 +687,7 @@ def rigid_body_modes(mesh, template, held=()):
         for k, v in enumerate(modes):      # about the centroid
             v.set(0.0)
             a = v.getArray().reshape(-1, 3)            # by vertex row
-            _write_rigid_field(a, r, k, x)
+            elasticity.write_rigid_motion(a, r, k, x)
             for rows, normal in held_rows:
                 if normal is None:
                     a[rows] = 0.0
@@ -760,7 +739,8 @@ def slip_modes(mesh, template, surfaces, held_dofs):
     blocks = []
     for body in sorted(weights):
         mine = in_body[body]
-        fields = _rigid_fields(comm, mesh.coords[owned_v[mine]]) * weights[body][mine][None, :, None]
+        fields = elasticity.rigid_motions(_centred(comm, mesh.coords[owned_v[mine]]))
+        fields *= weights[body][mine][None, :, None]
         cols = (rows[mine][:, None] + np.arange(3)).ravel()
         values = fields.reshape(6, -1)
         values[:, held[cols]] = 0.0

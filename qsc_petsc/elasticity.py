@@ -29,6 +29,33 @@ for _i, (_j, _k) in enumerate([(0, 0), (1, 1), (2, 2), (1, 2), (0, 2), (0, 1)]):
 _VOIGT_OF_GRADIENT = _VOIGT.transpose(0, 2, 1).reshape(6, 9).T     # (9, 6): H.ravel() (H_kj = d u_j / d x_k) -> eps
 
 
+# the rigid-body motions, the strain's null space, in the order every caller numbers them (near-nullspace, slip modes,
+# the free-motion check and its messages)
+RIGID_MODES = ("translation x", "translation y", "translation z", "rotation about x", "rotation about y",
+               "rotation about z")
+
+
+def write_rigid_motion(a, rows, k, r):
+    """Rigid motion k (RIGID_MODES' order: unit translations, then unit-rate rotations e_axis x r) at points r (m, 3)
+    taken from the rotations' centre into rows `rows` of a (n, 3), whose other entries it leaves."""
+    if k < 3:
+        a[rows, k] = 1.0
+    else:
+        # e_axis x r: two components of r, one negated (no products; np.cross took twice the time)
+        i, j = (k - 2) % 3, (k - 1) % 3
+        a[rows, i] = -r[:, j]
+        a[rows, j] = r[:, i]
+
+
+def rigid_motions(r):
+    """The six rigid motions (6, m, 3) at points r (m, 3) taken from the rotations' centre (RIGID_MODES' order)."""
+    r = np.asarray(r, dtype=float).reshape(-1, 3)
+    fields = np.zeros((6, len(r), 3))
+    for k in range(6):
+        write_rigid_motion(fields[k], slice(None), k, r)
+    return fields
+
+
 def lame(youngs_modulus, poissons_ratio):
     """Lame parameters (lmbda, mu) from Young's modulus E (Pa) and Poisson's ratio nu (-)."""
     E, nu = np.asarray(youngs_modulus, float), np.asarray(poissons_ratio, float)

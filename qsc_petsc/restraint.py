@@ -15,8 +15,8 @@ import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
-MODES = ("translation x", "translation y", "translation z", "rotation about x", "rotation about y",
-         "rotation about z")
+from .elasticity import RIGID_MODES, rigid_motions
+
 # B^T B eigenvalues below this fraction of the largest are a null space: a held direction
 # contributes O(1) per held dof or row, an unheld one round-off (1e-16 relative)
 FREE_TOL = 1e-9
@@ -24,20 +24,6 @@ FREE_TOL = 1e-9
 SHOW_TOL = 0.3
 # Restraint.loose: a row whose force is at most this share of the largest row force carries none
 LOOSE_SHARE = 1e-9
-
-
-def rigid_velocities(x, centre, length):
-    """Nodal velocities (n, 3, 6) of the six rigid motions at points x (n, 3): unit translations, and
-    rotations about centre at unit angular speed scaled by 1/length (unit speed at distance length)."""
-    x = np.asarray(x, dtype=float).reshape(-1, 3)
-    v = np.zeros((len(x), 3, 6))
-    v[:, [0, 1, 2], [0, 1, 2]] = 1.0
-    r = (x - np.asarray(centre, dtype=float)) / length
-    for k in range(3):                  # e_k x r: two components of r, one negated (no products; np.cross: 2x the time)
-        i, j = (k + 1) % 3, (k + 2) % 3
-        v[:, i, 3 + k] = -r[:, j]
-        v[:, j, 3 + k] = r[:, i]
-    return v
 
 
 def free_motions(gram, body_names):
@@ -52,12 +38,12 @@ def free_motions(gram, body_names):
     share = np.linalg.norm(null, axis=1).reshape(len(body_names), 6)
     out = {}
     for b, name in enumerate(body_names):
-        modes = [MODES[k] for k in range(6) if share[b, k] >= SHOW_TOL]
+        modes = [RIGID_MODES[k] for k in range(6) if share[b, k] >= SHOW_TOL]
         if modes:
             out[name] = modes
     if not out:    # a free combination spread thin over many modes: name its largest parts
         b, k = np.unravel_index(int(np.argmax(share)), share.shape)
-        out[body_names[b]] = [MODES[k]]
+        out[body_names[b]] = [RIGID_MODES[k]]
     return out
 
 
@@ -94,8 +80,9 @@ class Restraint:
         body = self.mesh.vertex_body[vertices]
         for b, (centre, length) in enumerate(self.frames):
             sel = np.flatnonzero(body == b)
-            v = rigid_velocities(self.mesh.coords[vertices[sel]], centre, length)
-            out[sel, 6 * b:6 * b + 6] = v[np.arange(len(sel)), components[sel]]
+            # rotations at unit speed at distance `length` from the centre: every motion's rows of one size
+            v = rigid_motions((self.mesh.coords[vertices[sel]] - centre) / length)
+            out[sel, 6 * b:6 * b + 6] = v[:, np.arange(len(sel)), components[sel]].T
         return out
 
     def _motion_matrix(self):

@@ -198,12 +198,16 @@ class Run:
         return self.mesh.local_vectors(u)
 
     @cached_property
+    def held_boundaries(self):
+        """(index, boundary) of the displacement and symmetry boundaries: those with a reaction."""
+        return [(i, bc) for i, bc in enumerate(self.scene.boundary) if bc.type != "pressure"]
+
+    @cached_property
     def reaction_cells(self):
         """The local cells at a displacement or symmetry surface's vertices, whose element forces the reactions sum."""
         at = np.zeros(len(self.mesh.coords), bool)
-        for bc in self.scene.boundary:
-            if bc.type != "pressure":
-                at[self.mesh.surface_vertices(bc.surface)] = True
+        for _, bc in self.held_boundaries:
+            at[self.mesh.surface_vertices(bc.surface)] = True
         return np.flatnonzero(at[self.mesh.cells].any(axis=1))
 
     def reactions(self, u, t):
@@ -213,7 +217,7 @@ class Run:
         surfaces' vertices (985k-dof box, 2 ranks: 0.25-0.34 s over every cell); none without such boundaries."""
         mesh = self.mesh
         dm = mesh.dm
-        held = [(i, bc) for i, bc in enumerate(self.scene.boundary) if bc.type != "pressure"]
+        held = self.held_boundaries
         if not held:
             return {}
         ul = self.local_displacement(u).ravel()

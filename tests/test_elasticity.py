@@ -189,3 +189,21 @@ def test_flat_cell_raises_whatever_the_sign_of_its_round_off():
 def test_von_mises():
     s = np.array([[-3e6, 0, 0, 0, 0, 0], [0, 0, 2e6, 0, 0, 0], [1e6, 1e6, 1e6, 0, 0, 0], [0, 0, 0, 0, 0, 1e6]])
     assert np.allclose(el.von_mises(s), [3e6, 2e6, 0.0, np.sqrt(3) * 1e6])
+
+
+@pytest.mark.parametrize("cell_type", ["hex", "tet"])
+def test_rigid_motions_strain_nothing(cell_type):
+    """The six rigid motions are unit translations and unit-rate rotations e_axis x r about the given centre, in
+    RIGID_MODES' order, and a distorted cell's stiffness takes none of them to any force."""
+    r = np.array([[0.0, 0.0, 0.0], [0.5, -1.0, 1.5]])
+    v = el.rigid_motions(r)
+    assert np.array_equal(v[:3], np.broadcast_to(np.eye(3)[:, None, :], (3, 2, 3)))
+    assert np.allclose(v[3:, 0], 0.0)                                 # the centre does not move in rotation
+    for axis, name in enumerate(("x", "y", "z")):
+        assert el.RIGID_MODES[3 + axis] == f"rotation about {name}"
+        assert np.allclose(v[3 + axis, 1], np.cross(np.eye(3)[axis], r[1]))
+    xe = distorted_cells(cell_type, 3, seed=5)
+    K = el.stiffness(cell_type, xe, LMBDA, MU)
+    for m in range(len(xe)):
+        u = el.rigid_motions(xe[m] - [0.3, -0.2, 0.7]).reshape(6, -1)
+        assert np.abs(K[m] @ u.T).max() <= 1e-12 * np.abs(K[m]).max()

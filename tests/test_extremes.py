@@ -14,7 +14,8 @@ sys.path.insert(0, str(ROOT / "scripts"))
 import stability as S
 
 from qsc_petsc.contact.penalty import row_response
-from qsc_petsc.restraint import MODES, free_motions, rigid_velocities
+from qsc_petsc.elasticity import RIGID_MODES as MODES
+from qsc_petsc.restraint import free_motions
 
 FORMULATIONS = list(S.FORMULATIONS)
 
@@ -213,15 +214,6 @@ def test_nodes_on_edges_and_vertices(element, lower, upper, formulation):
 
 
 # ---------------------------------------------------------------- the restraint kernel
-
-def test_rigid_velocities_are_rigid():
-    """The six motions are unit translations and unit-rate rotations scaled by 1/length about the centre."""
-    x = np.array([[1.0, 2.0, 3.0], [0.0, 0.0, 0.0]])
-    v = rigid_velocities(x, centre=[1.0, 2.0, 3.0], length=2.0)
-    assert np.array_equal(v[:, :, :3], np.broadcast_to(np.eye(3), (2, 3, 3)))
-    assert np.allclose(v[0, :, 3:], 0.0)                                 # the centre does not move in rotation
-    assert np.allclose(v[1, :, 5], np.cross([0, 0, 1], [-0.5, -1.0, -1.5]))
-
 
 def test_free_motions_names_the_null_space():
     """A Gram matrix holding body a fully and body b in all but translation z and rotation about x reports
