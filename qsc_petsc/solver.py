@@ -35,6 +35,10 @@ MUMPS_MEMORY_ERRORS = (-19, -13)
 # (ICNTL(23), System._mumps_memory_cap): the rest is for the matrix, vectors and the solve's own arrays
 MUMPS_MEMORY_SHARE = 0.9
 KSP_MAX_IT = 2000              # Krylov iterations per linear solve unless -qsc_ksp_max_it says otherwise
+# SNES types that take Newton steps with the Jacobian and stop by System._converged (the active set and the force
+# residual): the others stop by tests of their own (ksponly after one linear solve, ngmres on a step norm it never
+# formed, the VI solvers by theirs) and ended "converged" with the contact force off by orders of magnitude
+NEWTON_TYPES = ("newtonls", "newtontr")
 START_TOUCHING, START_REACH = "touching", "reach"   # ConstraintTerm.start: an increment's first closed set
 DAMPING_HALVINGS = 8           # smallest damped Newton step 1/2^7 (System._damp)
 # Newton iterations without a new lowest residual after which steps are damped (System._watch_cycles): 8 damped
@@ -307,6 +311,10 @@ class System:
             options.set_from_options(self.snes, "solver (-qsc_snes_*, -qsc_ksp_*, -qsc_pc_*)")
         finally:
             options.remove_options(added)
+        if self.snes.getType() not in NEWTON_TYPES:
+            raise SceneError(f"-qsc_snes_type {self.snes.getType()}: not a Newton method this solver can check "
+                             f"(the active set and the force residual); use one of {', '.join(NEWTON_TYPES)}")
+        self.test_reason = 0           # what _converged last answered: a solve converges by it alone
         self.mumps_cap = self._mumps_memory_cap(available_memory)
 
     def _mumps_memory_cap(self, available):
@@ -565,6 +573,12 @@ class System:
         return self.comm.allreduce(int(sum(t.active.sum() for t in self.terms)), op=MPI.SUM)
 
     def _converged(self, snes, it, norms):
+        """SNES's convergence test (_newton_test), its answer kept: a positive reason SNES sets by itself (a trust
+        region's own stop) is no convergence (solve_at)."""
+        self.test_reason = self._newton_test(snes, it, norms)
+        return self.test_reason
+
+    def _newton_test(self, snes, it, norms):
         xnorm, ynorm, fnorm = norms
         active = np.concatenate([t.active for t in self.terms]) if self.terms else np.zeros(0, bool)
         changed = 0 if self.prev_active is None else int(np.sum(active != self.prev_active))
@@ -707,6 +721,7 @@ class System:
                 start = self._start_mode(u)
             for term in self.terms:
                 term.start = start
+            self.test_reason = 0
             try:
                 with self._mumps_options():
                     self.snes.solve(None, u)
@@ -731,10 +746,14 @@ class System:
         ksp_reason = self.snes.getKSP().getConvergedReason()
         if reason == 0 and ksp_reason < 0:      # stopped inside the linear solve, before SNES set its reason
             reason = PETSc.SNES.ConvergedReason.DIVERGED_LINEAR_SOLVE
+        shown = SNES_REASONS.get(reason, str(reason))
+        if reason > 0 and reason != self.test_reason:
+            shown += " (set by SNES itself; the Newton test had not passed)"
+            reason = -reason
         stats = {
             "snes_iterations": self.snes.getIterationNumber(),
             "ksp_iterations": self.snes.getLinearSolveIterations(),
-            "snes_reason": SNES_REASONS.get(reason, str(reason)),
+            "snes_reason": shown,
             "ksp_reason": KSP_REASONS.get(ksp_reason, str(ksp_reason)),
             "active_rows": self.active_count(),
             "closed_start": start,          # the rows the increment started closed (None without rows)

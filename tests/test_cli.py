@@ -233,6 +233,13 @@ def _negative_tolerance(tmp):
     return [block_scene(tmp), "-qsc_ksp_rtol", "-1"], ["-qsc_ksp_rtol: must be a finite number >= 0, got '-1'"]
 
 
+def _snes_without_newton_test(tmp):
+    # ksponly stops after one linear solve, whatever the contact rows or the residual: it reported success with
+    # the contact force off by orders of magnitude
+    return [block_scene(tmp), "-qsc_snes_type", "ksponly"], ["-qsc_snes_type ksponly", "not a Newton method",
+                                                             "newtonls, newtontr"]
+
+
 def _result_name_taken(tmp):
     (tmp / "out" / "solution.h5").mkdir(parents=True)      # where the run would write its fields
     return [block_scene(tmp)], ["output:", "solution.h5", "is a folder"]
@@ -240,7 +247,8 @@ def _result_name_taken(tmp):
 
 BAD_INPUT = [_unknown_key, _wrong_type, _negative_modulus, _missing_mesh_file, _unknown_box_surface,
              _unknown_file_surface, _not_a_mesh, _unknown_set_path, _set_missing_entry, _unavailable_partitioner,
-             _huge_box, _pressure_not_finite, _conflicting_boundaries, _negative_tolerance, _result_name_taken]
+             _huge_box, _pressure_not_finite, _conflicting_boundaries, _negative_tolerance, _snes_without_newton_test,
+             _result_name_taken]
 SERIAL_OK = {_unavailable_partitioner}     # cases that only fail in parallel
 
 
