@@ -82,6 +82,11 @@ class ResultWriter:
             with h5py.File(self.directory / "solution.h5", "w") as h5:
                 h5["mesh/geometry"] = points
                 h5["mesh/topology"] = cells
+            # an earlier run's XDMF files in this folder point into the solution.h5 just rewritten: unreadable now
+            # (a folder in the way of a file is left to the write that meets it, which names it)
+            for stale in [self.directory / "solution.xdmf", *(self.directory / "steps").glob("step_*.xdmf*")]:
+                if stale.is_file():
+                    stale.unlink()
             self.shape = (len(points), cells.shape)
         write_on_root(self.comm, self.directory / "solution.h5", write)
 
@@ -143,9 +148,14 @@ class ResultWriter:
 
 
 def _atomic_write(path, text):
+    """`text` into `path` through a temporary file beside it, renamed over it; an OSError names `path`."""
     tmp = Path(f"{path}.tmp")
     tmp.write_text(text)
-    os.replace(tmp, path)
+    try:
+        os.replace(tmp, path)
+    except OSError as exc:          # e.g. a folder where the file goes: name it, not the temporary file
+        tmp.unlink(missing_ok=True)
+        raise OSError(exc.errno, exc.strerror, str(path)) from None
 
 
 def write_json(path, data):

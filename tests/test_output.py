@@ -23,11 +23,16 @@ PRESSURE = 1.0          # Pa on upper.zmax, area 1 m^2 (configs/patch_test.toml)
 DIRECT = ["-qsc_ksp_type", "preonly", "-qsc_pc_type", "redundant", "-qsc_redundant_pc_type", "lu"]
 
 
-def _run_patch(folder, ranks):
+def _patch_args(folder, *sets):
+    """qsc's arguments for the patch test into `folder`, with OVERRIDES and then `sets`."""
     args = ["run", PATCH, "--out", folder, *DIRECT]
-    for text in OVERRIDES:
+    for text in (*OVERRIDES, *sets):
         args += ["--set", text]
-    code, out = qsc(args, ranks)
+    return args
+
+
+def _run_patch(folder, ranks):
+    code, out = qsc(_patch_args(folder), ranks)
     assert code == 0, out
     return folder
 
@@ -129,6 +134,31 @@ def test_resolved_scene_loads_back_equal(serial):
     ran = load_scene(PATCH, OVERRIDES)
     again = load_scene(serial / "scene.resolved.toml")
     assert again.to_dict() == ran.to_dict()
+
+
+def test_a_run_into_an_earlier_runs_folder_leaves_only_its_own_steps(serial, tmp_path):
+    """A run into a folder that holds an earlier run's results (two steps) with one step shall leave that one
+    step's files only: the earlier step files pointed into the solution.h5 the new run rewrote."""
+    import shutil
+    folder = tmp_path / "out"
+    shutil.copytree(serial, folder)
+    code, out = qsc(_patch_args(folder, "load.steps=1"), 1)
+    assert code == 0, out
+    assert sorted(p.name for p in (folder / "steps").iterdir()) == ["step_0001.xdmf"]
+    assert meshio.read(folder / "steps" / "step_0001.xdmf").point_data["displacement"].shape[1] == 3
+    with meshio.xdmf.TimeSeriesReader(folder / "solution.xdmf") as series:
+        assert series.num_steps == 1
+
+
+def test_a_folder_where_a_step_file_goes_is_named(tmp_path):
+    """A folder in place of a step's XDMF file shall end the run with exit 2 and one line naming that file (not
+    the temporary file written beside it), and leave no temporary file."""
+    folder = tmp_path / "out"
+    (folder / "steps" / "step_0002.xdmf").mkdir(parents=True)
+    code, out = qsc(_patch_args(folder), 1)
+    assert code == 2, out
+    assert "step_0002.xdmf'" in out and "Is a directory" in out and ".tmp" not in out, out
+    assert not list((folder / "steps").glob("*.tmp"))
 
 
 # ---------------------------------------------------------------- rank independence
