@@ -13,6 +13,7 @@ from . import elasticity, elimination, fem, lattice, sparsity
 from .errors import MeshError, SceneError
 from .expression import compile_expression
 from .mesh import on_all
+from .scene import MAX_MAGNITUDE, MIN_MAGNITUDE
 
 CHUNK = 16384              # cells per vectorised kernel call: bounds temporary memory
 FEW_GROUPS = 64            # congruent cell groups up to which K u goes group by group
@@ -577,20 +578,49 @@ def surface_load(mesh, scene, template):
         c, lf = mesh.surface_faces(bc.surface)
         nodes = mesh.face_nodes(c, lf)
         field = isinstance(bc.value, str)
+        # a field's values at the quadrature points are kept for the check below
+        pressure, values = _recording(compile_expression(bc.value)) if field else (bc.value, [])
         # a pressure field varies within faces: a 3-point rule per direction integrates it better than 2
-        fe = fem.face_pressure_loads(mesh.face_type, mesh.coords[nodes],
-                                     compile_expression(bc.value) if field else bc.value, n_gauss=3 if field else 2)
-        bad = np.flatnonzero(~np.isfinite(fe).all(axis=tuple(range(1, fe.ndim))))      # a rank may hold no face
-        near = mesh.coords[nodes[bad[0]]].mean(axis=0) if len(bad) else None
-        near = next((x for x in mesh.comm.allgather(near) if x is not None), None)
-        if near is not None:
-            raise SceneError(f"boundary[{i}].value: the pressure {bc.value!r} on {bc.surface} is not finite on "
-                             f"the face near x, y, z = {', '.join(f'{v:.4g}' for v in near)} (a division by zero, "
-                             f"the log or square root of a negative number, or an overflow)")
+        fe = fem.face_pressure_loads(mesh.face_type, mesh.coords[nodes], pressure, n_gauss=3 if field else 2)
+        _check_pressure_field(mesh, i, bc, values[0].reshape(len(nodes), -1) if values and len(nodes) else None,
+                              nodes)
         dofs = (3 * mesh.gvert[nodes][:, :, None] + np.arange(3)).ravel()
         f.setValues(dofs.astype(PETSc.IntType), fe.ravel(), addv=ADD)
     f.assemble()
     return f
+
+
+def _recording(field):
+    """The function `field` of points, and the list each of its answers goes to."""
+    seen = []
+
+    def recorded(x):
+        seen.append(np.asarray(field(x), dtype=float))
+        return seen[-1]
+    return recorded, seen
+
+
+def _check_pressure_field(mesh, index, bc, p, nodes):
+    """A SceneError naming boundary[index].value when its field's values p (faces, points; None for a number: the
+    scene checked it) are not finite or not 0 nor of magnitude within the scene's limits anywhere (collective)."""
+    bad = None
+    if p is not None:
+        size = np.abs(p)
+        wrong = ~np.isfinite(p) | ((p != 0) & ((size < MIN_MAGNITUDE) | (size > MAX_MAGNITUDE)))
+        face = np.flatnonzero(wrong.any(axis=1))        # a rank may hold no face
+        if len(face):
+            bad = (mesh.coords[nodes[face[0]]].mean(axis=0), float(p[face[0]][wrong[face[0]]][0]))
+    bad = next((b for b in mesh.comm.allgather(bad) if b is not None), None)
+    if bad is None:
+        return
+    near, value = bad
+    where = f"the face near x, y, z = {', '.join(f'{v:.4g}' for v in near)}"
+    head = f"boundary[{index}].value: the pressure {bc.value!r} on {bc.surface} is"
+    if not np.isfinite(value):
+        raise SceneError(f"{head} not finite on {where} (a division by zero, the log or square root of a negative "
+                         f"number, or an overflow)")
+    raise SceneError(f"{head} {value:.3g} on {where}: a value must be 0 or of magnitude between {MIN_MAGNITUDE:g} and "
+                     f"{MAX_MAGNITUDE:g}")
 
 
 def dirichlet_dofs(mesh, scene):

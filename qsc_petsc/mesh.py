@@ -20,6 +20,11 @@ from .meshgen import box_mesh, read_mesh_file
 from .options import option_value
 from .partition import cell_centroids, coordinate_bisection
 
+# a body's largest extent, in the scene's length unit: areas, stiffnesses and the contact quadrature take powers of
+# lengths, which leave double precision far beyond these (a patch test 1e-80 wide failed its contact quadrature);
+# docs/stability.md measures scenes scaled from 1e-28 to 1e28
+MIN_EXTENT, MAX_EXTENT = 1e-30, 1e30
+
 MAX_SURFACES = 62          # face membership travels as one int64 bitmask per cell face
 
 
@@ -229,6 +234,7 @@ def build_global_mesh(scene):
             bm = read_mesh_file(str(mesh_file(spec.part, spec.level, spec.radius, spec.cache)))
         else:
             bm = read_mesh_file(spec.path, spec.scale)
+        _check_extent(b, spec, bm.points)
         cell_types.add(bm.cell_type)
         if len(cell_types) > 1:
             raise SceneError(f"bodies[{b}].mesh: all bodies must use one element type "
@@ -247,6 +253,16 @@ def build_global_mesh(scene):
         offset += len(bm.points)
     return GlobalMesh(np.concatenate(points), np.concatenate(cells), cell_types.pop(),
                       np.concatenate(bodies), np.concatenate(masks), names)
+
+
+def _check_extent(index, spec, points):
+    """A MeshError naming bodies[index].mesh when the body's largest extent is outside [MIN_EXTENT, MAX_EXTENT]."""
+    extent = float(np.ptp(points, axis=0).max()) if len(points) else 0.0
+    if MIN_EXTENT <= extent <= MAX_EXTENT:
+        return
+    key = {"box": ".size", "file": ".scale"}.get(spec.type, "")
+    raise MeshError(f"bodies[{index}].mesh{key}: the body is {extent:.3g} across (in the scene's length unit); a body's "
+                    f"extent must lie between {MIN_EXTENT:g} and {MAX_EXTENT:g} (areas and stiffnesses take its powers)")
 
 
 def check_surface_references(scene, surface_names):

@@ -22,6 +22,10 @@ REQUIRED = object()
 # penalties are multiplied and squared downstream (eps_n = alpha E / h, norms of forces), and a value near the
 # floating-point limits overflowed there into a traceback (a box 1e308 m wide) or an infinite stiffness
 MAX_MAGNITUDE, MIN_MAGNITUDE = 1e100, 1e-100
+# the largest dimensionless penalty alpha (contact pairs and dies): measured sound up to 1e10 (the patch test's
+# force balance to 2.5e-7 with MUMPS, docs/stability.md); at 1e11 Hertz's balance was off by 5e-3 and at 1e12
+# three identical runs ended "converged" 2.3x apart, the step too small to tell from round-off
+MAX_PENALTY = 1e10
 
 
 # ---------------------------------------------------------------- TOML text
@@ -172,7 +176,8 @@ class Float(Field):
         return self.kind + self._also()
 
     def range_text(self):
-        return " and ".join(f"{op} {bound!r}" for op, bound in self.bounds)
+        return " and ".join(f"{op} {bound:g}" if isinstance(bound, float) else f"{op} {bound!r}"
+                            for op, bound in self.bounds)
 
 
 class Int(Float):
@@ -495,7 +500,8 @@ CONTACT = Table({
                                 "(paper [8]-[10]); the same with nodal integration.", default="slave_at_points"),
     "gauss_points": Int("Gauss points per direction on each face with integration = \"gauss\" (a triangle "
                         "gets the collapsed n x n rule).", ge=1, le=10, default=3),
-    "penalty": Float("Dimensionless alpha of the penalty eps_n = alpha * E_eff / h_eff.", gt=0, default=1e4),
+    "penalty": Float("Dimensionless alpha of the penalty eps_n = alpha * E_eff / h_eff (at most 1e10; tighter "
+                     "contact: enforcement = \"augmented_lagrangian\").", gt=0, le=MAX_PENALTY, default=1e4),
     "enforcement": Choice(("penalty", "augmented_lagrangian"), "How the constraint is enforced.", default="penalty"),
     "augmented_tolerance": Float("Relative change of the multipliers that ends the augmented Lagrangian loop.",
                                  gt=0, default=1e-6),
@@ -535,7 +541,8 @@ DIE = Table({
                    unit="m"),
     "surfaces": ListOf(SurfaceRef(), "Body surfaces the die can touch.", min_len=1),
     "condition": Choice(("frictionless", "sticking"), "Tangential condition on the die face.", default="frictionless"),
-    "penalty": Float("Dimensionless alpha of the penalty eps_n = alpha * E / h.", gt=0, default=1e4),
+    "penalty": Float("Dimensionless alpha of the penalty eps_n = alpha * E / h (at most 1e10).", gt=0,
+                     le=MAX_PENALTY, default=1e4),
     "search_distance": Float("Largest gap that still makes a contact row, in units of the body's element size.",
                              gt=0, default=1.0, unit="h"),
 })

@@ -4,10 +4,10 @@
 Small patch-test scenes (configs/patch_test.toml: two stacked blocks, pressure p = 1 Pa on top; exact
 answer sigma_zz = -p everywhere and, on matching meshes, a row penetration p / eps_n) pushed to the
 extremes: penalty alpha 1e0-1e10, slave/master element size 1:16-16:1, Young's modulus ratio 1e-4-1e4,
-Poisson's ratio up to 0.499, lengths in units from 1e-6 to 1e3, gaps, initial penetration, slave
+Poisson's ratio up to 0.499, lengths in units from 1e-28 to 1e28, gaps, initial penetration, slave
 nodes on master edges and vertices, bodies held only by contact, and the interface on one rank or
 split across ranks. tests/test_extremes.py and tests/parallel/test_extremes_parallel.py assert on the
-same functions. Usage: .venv/bin/python scripts/stability.py [--ranks 2 3] (about a minute, serial
+same functions. Usage: .venv/bin/python scripts/stability.py [--ranks 2 3] [--tables units ...] (about a minute, serial
 runs in-process, the parallel table under mpirun).
 """
 
@@ -228,7 +228,7 @@ RATIO_RULES = {
 }
 E_RATIOS = (1e-4, 1e-2, 1.0, 1e2, 1e4)
 NUS = (0.0, 0.3, 0.45, 0.49, 0.499)
-SCALES = (1e-6, 1e-3, 1.0, 1e3)
+SCALES = (1e-28, 1e-6, 1e-3, 1.0, 1e3, 1e28)     # to near the limits of a body's extent (mesh.MIN_EXTENT, MAX_EXTENT)
 
 
 def moduli(ratio, soft=1000.0):
@@ -533,10 +533,16 @@ def table_parallel(args):
                  "Newton N (1)", "du", "dF", "max\\|szz+p\\|/p; notes"], rows)
 
 
+TABLES = {"alpha": table_alpha, "ratio": table_ratio, "materials": table_materials, "units": table_units,
+          "special": table_special, "parallel": table_parallel}
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--ranks", type=int, nargs="*", default=[2, 3], help="rank counts of the parallel table")
     ap.add_argument("--parallel-json", help=argparse.SUPPRESS)   # internal: the parallel table's worker
+    ap.add_argument("--tables", nargs="+", choices=sorted(TABLES), default=sorted(TABLES),
+                    help="the tables to (re)write (default: all)")
     args = ap.parse_args()
     if args.parallel_json:
         comm = MPI.COMM_WORLD
@@ -552,13 +558,9 @@ def main():
                         "every table says the command that made it. Tests: tests/test_extremes.py, "
                         "tests/parallel/test_extremes_parallel.py.\n")
     os.chdir(ROOT)
-    table_alpha(args)
-    table_ratio(args)
-    table_materials(args)
-    table_units(args)
-    table_special(args)
-    if args.ranks:
-        table_parallel(args)
+    for name, table in TABLES.items():
+        if name in args.tables and (name != "parallel" or args.ranks):
+            table(args)
 
 
 if __name__ == "__main__":

@@ -217,9 +217,21 @@ def _huge_box(tmp):
         "bodies[0].mesh.cells", "[2000, 2000, 2000]", "24036018003 dofs", "32-bit"]
 
 
+def _body_too_small(tmp):
+    # lengths are raised to powers downstream: a patch test 1e-80 wide failed its contact quadrature
+    return [block_scene(tmp, mesh='type = "box", size = [1e-40, 1e-40, 1e-40], cells = [2, 2, 2]')], [
+        "bodies[0].mesh.size", "1e-40 across", "between 1e-30 and 1e+30"]
+
+
 def _pressure_not_finite(tmp):
     return [block_scene(tmp, extra=PRESSED.replace("value = 1.0", 'value = "1 / (z - 1)"'))], [
         "boundary[1].value", "'1 / (z - 1)'", "blk.zmax", "not finite"]
+
+
+def _pressure_out_of_range(tmp):
+    # finite, but squared downstream it overflowed: the run "converged" with displacements of 1e147 m
+    return [block_scene(tmp, extra=PRESSED.replace("value = 1.0", 'value = "1e150 * (1 + x)"'))], [
+        "boundary[1].value", "'1e150 * (1 + x)'", "blk.zmax", "of magnitude between 1e-100 and 1e+100"]
 
 
 def _conflicting_boundaries(tmp):
@@ -247,8 +259,8 @@ def _result_name_taken(tmp):
 
 BAD_INPUT = [_unknown_key, _wrong_type, _negative_modulus, _missing_mesh_file, _unknown_box_surface,
              _unknown_file_surface, _not_a_mesh, _unknown_set_path, _set_missing_entry, _unavailable_partitioner,
-             _huge_box, _pressure_not_finite, _conflicting_boundaries, _negative_tolerance, _snes_without_newton_test,
-             _result_name_taken]
+             _huge_box, _body_too_small, _pressure_not_finite, _pressure_out_of_range, _conflicting_boundaries,
+             _negative_tolerance, _snes_without_newton_test, _result_name_taken]
 SERIAL_OK = {_unavailable_partitioner}     # cases that only fail in parallel
 
 

@@ -65,3 +65,14 @@ def test_pressure_that_is_not_finite_is_a_scene_error(value, tmp_path):
     with pytest.raises(SceneError, match=r"^boundary\[5\]\.value: the pressure .* on upper\.zmax is not finite "
                                           r"on the face near x, y, z = "):
         run_scene(CONFIGS / "patch_test.toml", tmp_path, [f"boundary.5.value={value!r}"])
+
+
+@pytest.mark.parametrize("value", ["1e150 * (1 + x)", "1e-200", "2**1000"])
+def test_pressure_beyond_the_number_limits_is_a_scene_error(value, tmp_path):
+    """A pressure field whose finite values break the scene's number limits (0 or of magnitude 1e-100 to 1e100)
+    shall be a SceneError naming the key, where and the value: 1e150 * x ran to "converged" displacements of
+    1e147 m, 1e-200 to DIVERGED_MAX_IT."""
+    from conftest import run_scene
+    with pytest.raises(SceneError, match=r"^boundary\[5\]\.value: the pressure .* on upper\.zmax is \S+ on the face "
+                                          r"near x, y, z = .*: a value must be 0 or of magnitude between 1e-100"):
+        run_scene(CONFIGS / "patch_test.toml", tmp_path, [f"boundary.5.value={value!r}"])
