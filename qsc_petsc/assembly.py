@@ -626,11 +626,12 @@ def _check_pressure_field(mesh, index, bc, p, nodes):
 def dirichlet_dofs(mesh, scene):
     """Owned constrained dofs and their values [m] at full load, from displacement and symmetry boundaries.
 
-    Returns (dofs, values, per_boundary) where per_boundary[i] lists the owned dofs of boundary i."""
-    dofs, vals, where, per_bc = [], [], [], []
+    Returns (dofs, values, per_boundary) where per_boundary[i] lists the owned dofs whose reaction boundary i
+    reports: those it holds, each dof that several boundaries hold given to the first of them in the scene (a
+    clamped face's edge on a symmetry plane counted in both had the reactions off balance by that edge's)."""
+    dofs, vals, where = [], [], []
     for i, bc in enumerate(scene.boundary):
         if bc.type == "pressure":
-            per_bc.append(np.zeros(0, np.int64))
             continue
         v = mesh.surface_vertices(bc.surface)
         v = v[mesh.owned[v]]
@@ -638,20 +639,19 @@ def dirichlet_dofs(mesh, scene):
             comps = [(c, getattr(bc, k)) for c, k in enumerate(("ux", "uy", "uz")) if getattr(bc, k) is not None]
         else:
             comps = [(symmetry_axis(mesh, i, bc.surface), 0.0)]
-        mine = []
         for comp, value in comps:
             d = 3 * mesh.gvert[v] + comp
             dofs.append(d)
             vals.append(np.full(len(d), float(value)))
             where.append(np.stack([np.full(len(d), i), v, np.full(len(d), comp)], axis=1))
-            mine.append(d)
-        per_bc.append(np.concatenate(mine) if mine else np.zeros(0, np.int64))
     dofs = np.concatenate(dofs) if dofs else np.zeros(0, np.int64)
     vals = np.concatenate(vals) if vals else np.zeros(0)
     where = np.concatenate(where) if where else np.zeros((0, 3), np.int64)
+    # the entries go in scene order: a dof's first entry is the first boundary that holds it
     dofs, first, inverse = np.unique(dofs, return_index=True, return_inverse=True)
     _check_one_value(mesh, scene, vals, where, first[inverse])
-    return dofs, vals[first], per_bc
+    owner = where[first, 0]
+    return dofs, vals[first], [dofs[owner == i] for i in range(len(scene.boundary))]
 
 
 def _check_one_value(mesh, scene, vals, where, first_of):

@@ -234,7 +234,7 @@ class Run:
         out = {}
         for i, bc in held:
             # only the components this boundary holds: on an edge shared with another boundary the
-            # other components are that boundary's reaction
+            # other components are that boundary's reaction, and one that both hold the first's (dirichlet_dofs)
             dofs = self.bc_per_boundary[i]
             local = np.bincount(dofs % 3, weights=rarr[dofs - r0], minlength=3)
             total = self.comm.allreduce(local, op=MPI.SUM)

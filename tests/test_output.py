@@ -161,6 +161,41 @@ def test_a_folder_where_a_step_file_goes_is_named(tmp_path):
     assert not list((folder / "steps").glob("*.tmp"))
 
 
+SHARED_EDGE = """
+name = "shared_edge"
+[[bodies]]
+name = "block"
+mesh = { type = "box", size = [1.0, 1.0, 1.0], cells = [4, 4, 4] }
+material = { youngs_modulus = 1000.0, poissons_ratio = 0.3 }
+[[boundary]]
+surface = "block.zmin"
+type = "displacement"
+ux = 0.0
+uy = 0.0
+uz = 0.0
+[[boundary]]
+surface = "block.xmin"
+type = "symmetry"
+[[boundary]]
+surface = "block.zmax"
+type = "pressure"
+value = 1.0
+"""
+
+
+def test_reactions_balance_where_boundaries_hold_one_dof(tmp_path):
+    """A clamped face and a symmetry plane both hold u_x on their common edge: the edge's x-reaction shall count
+    once, in the first boundary's (scene order), so that the reactions balance the load (it was in both: their
+    x-components summed to 4 % of the load)."""
+    path = tmp_path / "shared_edge.toml"
+    path.write_text(SHARED_EDGE)
+    run, summary = run_scene(path, tmp_path / "out")
+    run.destroy()
+    reactions = summary["steps"][-1]["reactions"]
+    assert np.sum(list(reactions.values()), axis=0) == pytest.approx([0.0, 0.0, PRESSURE], abs=1e-9)
+    assert reactions["boundary[1] block.xmin"][0] != 0.0        # the plane's other nodes still push back
+
+
 # ---------------------------------------------------------------- rank independence
 
 def test_two_ranks_write_the_same_results(serial, parallel):
