@@ -196,6 +196,20 @@ def test_reactions_balance_where_boundaries_hold_one_dof(tmp_path):
     assert reactions["boundary[1] block.xmin"][0] != 0.0        # the plane's other nodes still push back
 
 
+def test_nodes_that_carry_contact_force_are_touching(tmp_path):
+    """contact_status shall be 1 on every node with contact traction, including block nodes just beyond the punch's
+    edge, which no punch facet faces but the punch's rows still press (they read -1: no projection)."""
+    sets = ["bodies.0.mesh.cells=[10,10,5]", "bodies.1.mesh.cells=[6,6,6]"]
+    run, summary = run_scene(CONFIGS / "flat_punch.toml", tmp_path / "out", sets)
+    run.destroy()
+    assert summary["status"] == "ok"
+    result = meshio.read(tmp_path / "out" / "steps" / f"step_{len(summary['steps']):04d}.xdmf")
+    traction, status = result.point_data["contact_traction"][:, 0], result.point_data["contact_status"][:, 0]
+    pressed = traction > 0
+    assert pressed.sum() > 0 and np.all(status[pressed] == 1.0)
+    assert np.any(status == -1.0)          # nodes of the block's top that face nothing and carry nothing
+
+
 # ---------------------------------------------------------------- rank independence
 
 def test_two_ranks_write_the_same_results(serial, parallel):

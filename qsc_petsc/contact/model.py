@@ -478,6 +478,8 @@ class ContactModel:
                 # hold a node that the increment's sliding has since lifted off the opposite facets)
                 touching = (h >= -self.scene.solver.active_set_tolerance * pd["h_eff"]) | (p_own[ok] > 0)
                 status[v, 0] = touching.astype(float)
+                # a node beyond the opposite surface's edge that its neighbours' rows still press carries force too
+                status[S.nodes[~ok & (p_own > 0)], 0] = 1.0
                 force = self.comm.allreduce(-F[_owned_rows(mesh, S.nodes)].sum(axis=0), op=MPI.SUM)
                 entry[f"max_penetration_{side}"] = self.comm.allreduce(float(h.max(initial=-np.inf)), op=MPI.MAX)
                 a = S.area[ok]
