@@ -18,6 +18,10 @@ from .mesh import on_root
 
 TOPOLOGY = {"hex": "Hexahedron", "tet": "Tetrahedron"}
 ATTRIBUTE_TYPE = {1: "Scalar", 3: "Vector", 6: "Tensor6"}
+# XDMF's Tensor6 holds a symmetric tensor as xx, xy, xz, yy, yz, zz, and readers take it so: VTK's XDMF reader
+# (ParaView's; VTK 9.7) expands it to the full 3 x 3 in that order, and read the fields' Voigt order (xx, yy, zz, yz,
+# xz, xy) with zz as xz
+VOIGT_TO_TENSOR6 = [0, 5, 4, 1, 3, 2]
 
 
 # what a run writes in its output folder: (name, is a folder)
@@ -91,7 +95,9 @@ class ResultWriter:
         write_on_root(self.comm, self.directory / "solution.h5", write)
 
     def write_step(self, step, time, point_data, cell_data):
-        """point_data: name -> (local vertices, k) arrays; cell_data: name -> (local cells, k) arrays."""
+        """point_data: name -> (local vertices, k) arrays; cell_data: name -> (local cells, k) arrays, those of 6
+        components symmetric tensors in Voigt order (xx, yy, zz, yz, xz, xy), written in XDMF's (xx, xy, xz, yy, yz,
+        zz)."""
         if not self.enabled:
             return
         mesh = self.mesh
@@ -100,7 +106,10 @@ class ResultWriter:
             gathered[("Node", name)] = gather_rows(self.comm, mesh.vert_orig[self.own_v],
                                                    np.asarray(arr)[self.own_v], mesh.n_vertices)
         for name, arr in cell_data.items():
-            gathered[("Cell", name)] = gather_rows(self.comm, mesh.cell_orig, np.asarray(arr), mesh.n_cells)
+            arr = np.asarray(arr)
+            gathered[("Cell", name)] = gather_rows(self.comm, mesh.cell_orig,
+                                                   arr[:, VOIGT_TO_TENSOR6] if arr.shape[1:] == (6,) else arr,
+                                                   mesh.n_cells)
 
         def write():
             import h5py

@@ -68,7 +68,7 @@ def test_step_file_has_the_fields(serial):
     assert mesh.point_data["displacement"].shape == (n_points, 3)
     assert np.abs(mesh.point_data["displacement"]).max() == pytest.approx(
         summary["steps"][0]["max_abs_displacement"], rel=1e-12)
-    stress = mesh.cell_data["stress"][0]
+    stress = mesh.cell_data["stress"][0]           # XDMF's Tensor6 order: xx, xy, xz, yy, yz, zz
     assert stress.shape == (n_cells, 6)
     shapes = {name: np.shape(mesh.cell_data[name][0]) for name in ("von_mises", "body", "rank")}
     assert all(shape in ((n_cells,), (n_cells, 1)) for shape in shapes.values()), shapes
@@ -76,8 +76,27 @@ def test_step_file_has_the_fields(serial):
     assert np.array_equal(np.unique(body), [0, 1])
     assert np.all(np.ravel(mesh.cell_data["rank"][0]) == 0)
     # uniaxial pressure at half load: sigma_zz about -p/2, von Mises about p/2 (non-matching meshes: not exact)
-    assert np.median(stress[:, 2]) == pytest.approx(-0.5 * PRESSURE, rel=0.05)
+    assert np.median(stress[:, 5]) == pytest.approx(-0.5 * PRESSURE, rel=0.05)
     assert np.median(np.ravel(mesh.cell_data["von_mises"][0])) == pytest.approx(0.5 * PRESSURE, rel=0.05)
+
+
+def test_stress_is_written_in_xdmf_tensor6_order(tmp_path):
+    """A symmetric tensor field (Voigt order xx, yy, zz, yz, xz, xy in the program) shall be written in XDMF's
+    Tensor6 order xx, xy, xz, yy, yz, zz, the order in which VTK's XDMF reader (ParaView's) expands it: the
+    Voigt order showed zz as xz there."""
+    run, summary = run_scene(CONFIGS / "block_compression.toml", tmp_path / "out")
+    try:
+        cells = len(run.mesh.cells)
+        voigt = np.tile(np.arange(1.0, 7.0), (cells, 1))            # xx=1 yy=2 zz=3 yz=4 xz=5 xy=6
+        run.writer.write_step(9, 9.0, {}, {"stress": voigt})
+    finally:
+        run.destroy()
+    written = meshio.read(tmp_path / "out" / "steps" / "step_0009.xdmf").cell_data["stress"][0]
+    assert np.array_equal(written, np.tile([1.0, 6.0, 5.0, 2.0, 4.0, 3.0], (summary["mesh"]["cells"], 1)))
+    # the program's own uniaxial answer: sigma_zz in the last place, the shear entries zero
+    step = meshio.read(tmp_path / "out" / "steps" / "step_0001.xdmf").cell_data["stress"][0]
+    assert np.allclose(step[:, [1, 2, 4]], 0.0, atol=1e-8 * np.abs(step[:, 5]).max())
+    assert np.all(step[:, 5] < 0.0)
 
 
 def test_time_series_has_one_entry_per_load_step(serial):
