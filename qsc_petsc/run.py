@@ -334,7 +334,10 @@ class Run:
         in_effect = self.summary["petsc_options"] = options.options_in_effect()
         self.write_summary()
         path = self.out / "petsc_options.txt"
-        write_on_root(self.comm, path, lambda: path.write_text(options.options_text(in_effect, self.from_scene)))
+        system = getattr(self, "system", None)
+        settings = system.settings() if system is not None else ()
+        write_on_root(self.comm, path,
+                      lambda: path.write_text(options.options_text(in_effect, self.from_scene, settings)))
 
     def _step_record(self, step, t, stats, u, ul):
         last = stats["solves"][-1]

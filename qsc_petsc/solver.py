@@ -843,6 +843,30 @@ class System:
         pc.reset()        # PETSc skips the numeric factorization of a failed MUMPS factor: make a new one
         return True
 
+    def settings(self):
+        """Lines naming what the SNES, its KSP and PC hold (petsc_options.txt): what qsc set through the API and
+        PETSc's defaults, which the options database does not list. The KSP's atol is the last Newton step's."""
+        snes, ksp = self.snes, self.snes.getKSP()
+        rtol, atol, stol, max_it = snes.getTolerances()
+        krtol, katol, _, kmax = ksp.getTolerances()
+        norm = {v: k for k, v in vars(PETSc.KSP.NormType).items() if not k.startswith("_")}[ksp.getNormType()]
+        side = {0: "left", 1: "right", 2: "symmetric"}[ksp.getPCSide()]
+        lines = [f"# snes: {snes.getType()}, rtol {rtol:g}, atol {atol:g}, stol {stol:g}, max_it {max_it}",
+                 (f"# ksp: {ksp.getType()}, {side} preconditioning, {norm.lower()} norm, rtol {krtol:g}, "
+                  f"atol {katol:g}, max_it {kmax}")]
+        pc = ksp.getPC()
+        context = pc.getPythonContext() if pc.getType() == "python" else None
+        if isinstance(context, preconditioner.BandComposite):
+            band = context.band.ksp.getPC()
+            lines.append(f"# pc: band composite: {context.inner.getType()}, then"
+                         + (f" a Galerkin correction on {context.slip.modes()} slip modes and" if context.slip else "")
+                         + f" the band's {band.getType()} ({band.getFactorSolverType()}) on {self.band_dofs} dofs"
+                         + (" (symmetric: the multigrid again)" if context.symmetric else ""))
+        else:
+            factor = pc.getFactorSolverType() if pc.getType() in ("lu", "cholesky") else None
+            lines.append(f"# pc: {pc.getType()}" + (f" ({factor})" if factor else ""))
+        return lines
+
     def destroy(self):
         for name in self.own_options:
             PETSc.Options().delValue(name)

@@ -492,7 +492,8 @@ def test_command_line_options_win_over_the_scene(tmp_path):
     petsc_options.txt shall say where each option came from."""
     petsc = '\n[petsc]\nksp_type = "cg"\nksp_rtol = 1e-9\npc = { type = "jacobi" }\n'
     scene = block_scene(tmp_path, extra=PRESSED + petsc)
-    code, out = qsc(["run", scene, "--out", tmp_path / "out", "-qsc_ksp_type", "preonly", "-qsc_pc_type", "lu"])
+    code, out = qsc(["run", scene, "--out", tmp_path / "out", "-qsc_ksp_type", "preonly", "-qsc_pc_type", "lu",
+                     "-qsc_ksp_converged_reason"])
     assert code == 0, out
     text = (tmp_path / "out" / "petsc_options.txt").read_text()
     source = {}
@@ -504,9 +505,13 @@ def test_command_line_options_win_over_the_scene(tmp_path):
     assert source["-qsc_ksp_type"] == ("preonly", "command line"), text
     assert source["-qsc_pc_type"] == ("lu", "command line"), text
     assert source["-qsc_ksp_rtol"] == ("1e-09", "scene"), text
+    assert source["-qsc_ksp_converged_reason"] == ("", "command line"), text      # a flag: no value written
     # options the program sets itself are not the user's command line
     assert all(where != "command line" for name, (_, where) in source.items()
-               if name not in ("-qsc_ksp_type", "-qsc_pc_type")), text
+               if name not in ("-qsc_ksp_type", "-qsc_pc_type", "-qsc_ksp_converged_reason")), text
+    # then, as comments, what the solver objects hold: the options' effect and what qsc set through the API
+    assert "# snes: newtonls, rtol 1e-10, atol 0, stol 1e-10, max_it 60" in text, text
+    assert "# ksp: preonly, " in text and "max_it 2000" in text and "# pc: lu (" in text, text
     summary = _summary(tmp_path / "out")
     assert summary["status"] == "ok"
     assert summary["petsc_options"]["qsc_ksp_type"] == "preonly"

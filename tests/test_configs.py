@@ -56,3 +56,16 @@ def test_scene_runs(comm, mpi_tmp, path):
     names = ("summary.json", "scene.resolved.toml", "petsc_options.txt", "solution.xdmf", "solution.h5")
     written = [name for name in names if (mpi_tmp / name).is_file()] if comm.rank == 0 else None
     assert comm.bcast(written, root=0) == list(names)        # rank 0 writes them, and has by now
+
+
+def test_readme_scene_runs(tmp_path):
+    """The README's scene in brief shall run as printed there (it left the lower body free in x, y and about z
+    under its frictionless contact, so it stopped at load step 1)."""
+    readme = (CONFIGS.parent / "README.md").read_text()
+    start = readme.index("```toml\n", readme.index("A scene in brief:")) + len("```toml\n")
+    path = tmp_path / "readme_scene.toml"
+    path.write_text(readme[start:readme.index("```", start)])
+    run, summary = run_scene(path, tmp_path / "out")
+    run.destroy()
+    assert summary["status"] == "ok" and len(summary["steps"]) == 2
+    assert all(step["snes_reason"].startswith("CONVERGED") for step in summary["steps"])
