@@ -1,4 +1,5 @@
-"""`qsc check`: validate a scene, build and distribute its mesh, and report what a run would model."""
+"""`qsc check`: validate a scene, build and distribute its mesh, check that every body is held, and report what a run
+would model."""
 
 import numpy as np
 from mpi4py import MPI
@@ -17,8 +18,23 @@ def check(scene, comm):
         c, _ = mesh.surface_faces(name)
         surfaces[name] = comm.allreduce(len(c), op=MPI.SUM)
     bodies = [comm.allreduce(int(np.sum(mesh.cell_body == b)), op=MPI.SUM) for b in range(len(mesh.body_names))]
+    from .assembly import dirichlet_dofs
     from .contact.model import contact_plan
-    plan = contact_plan(mesh, scene)
+    from .restraint import Restraint, describe
+    from .solver import free_motion_error
+    template = mesh.dof_vector()
+    restraint = Restraint(mesh, dirichlet_dofs(mesh, scene)[0], template)
+
+    def held(terms):
+        # the run's check before its first solve: every body held by the boundaries and the rows within reach
+        free = describe(restraint.free(terms, False))
+        if free:
+            raise free_motion_error(1, free)
+    try:
+        plan = contact_plan(mesh, scene, held)
+    finally:
+        restraint.destroy()
+        template.destroy()
     mesh.dm.destroy()
     if comm.rank != 0:
         return ""

@@ -1046,6 +1046,12 @@ def _check_held(system, step):
     """A scene error when the terms just set leave a body free (System.free_motions)."""
     free = system.free_motions(system.terms, False) if system.free_motions else ""
     if free:
-        raise SceneError(f"load step {step}: free rigid-body motion of {free}: no displacement or symmetry "
-                         f"boundary holds it and no contact row or die within reach does (frictionless "
-                         f"contact holds the normal direction only); add a boundary condition")
+        raise free_motion_error(step, free)
+
+
+def free_motion_error(step, free):
+    """The SceneError for a load step whose boundaries and rows within reach leave the motions `free` (restraint.describe)
+    free; `qsc check` raises it for the first step too."""
+    return SceneError(f"load step {step}: free rigid-body motion of {free}: no displacement or symmetry boundary holds "
+                      f"it and no contact row or die within reach does (frictionless contact holds the normal "
+                      f"direction only); add a boundary condition")

@@ -356,6 +356,22 @@ def test_check_reports_mesh_partition_and_contact(tmp_path, ranks):
     assert not list(tmp_path.iterdir())
 
 
+@pytest.mark.parametrize("ranks", RANKS)
+def test_check_finds_a_free_body(tmp_path, ranks):
+    """qsc check shall end as the run would before its first solve (exit 2, the free motions named) when the
+    boundaries and the rows within reach leave a body free: the patch test without its rollers, whose frictionless
+    contact holds the normal only."""
+    scene = (CONFIGS / "patch_test.toml").read_text()
+    for roller in ('surface = "lower.xmin"', 'surface = "lower.ymin"'):
+        scene = scene.replace(roller, roller.replace("lower", "upper"), 1)     # the upper block held twice
+    path = tmp_path / "free.toml"
+    path.write_text(scene)
+    code, out = qsc(["check", path], ranks, cwd=tmp_path)
+    assert code == 2, out
+    assert own_lines(out)[-1].startswith("qsc: error: load step 1: free rigid-body motion of lower (translation x, "
+                                         "translation y, rotation about z)"), out
+
+
 # ---------------------------------------------------------------- failed solves
 
 def _summary(out_dir):

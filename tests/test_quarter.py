@@ -46,8 +46,8 @@ def test_check_reports_what_will_be_modelled(comm):
         assert "mesh: 560 hex cells, 862 vertices, 2586 dofs" in quarter
         assert "boundary conditions: 4" in quarter
         assert "contact[0]: upper.zmin (slave) / lower.zmax (master), quasi_symmetric" in quarter
-        assert "49 candidate rows at the start" in quarter      # 7 x 7 slave nodes of the quarter's 6 x 6 faces
-        assert "169 candidate rows at the start" in text["full"]   # 13 x 13 of the full 12 x 12
+        assert "49 candidate rows at the first search" in quarter      # 7 x 7 slave nodes of the quarter's 6 x 6 faces
+        assert "169 candidate rows at the first search" in text["full"]   # 13 x 13 of the full 12 x 12
         assert "8778 dofs" in text["full"] and 4 * 2586 < 1.2 * 8778
 
 

@@ -599,13 +599,18 @@ def _term_force(term, u):
     return F
 
 
-def contact_plan(mesh, scene):
-    """Lines for `qsc check`: what each contact pair and die will model (rows at the start)."""
+def contact_plan(mesh, scene, held=None):
+    """Lines for `qsc check`: what each contact pair and die will model (the rows of the first increment's search,
+    at u = 0, as a run makes them); held(terms), if given, is called with those terms (the free-motion check)."""
     if not (scene.contact or scene.die):
+        if held is not None:
+            held([])
         return ["contact: none (no contact search)"]
     template = mesh.dof_vector()
     model = ContactModel(mesh, scene, template)
-    terms = model.terms(template, 0.0)
+    terms = model.terms(template, 1.0 / scene.load.steps)
+    if held is not None:
+        held(terms)
     lines = []
     for pd, term in zip(model.pairs, terms):
         spec = pd["spec"]
@@ -613,12 +618,12 @@ def contact_plan(mesh, scene):
         lines.append(f"contact[{pd['index']}]: {spec.slave} (slave) / {spec.master} (master), {spec.formulation}, "
                      f"{spec.enforcement}; h_eff {pd['h_eff']:.4g} m, eps_n {pd['eps_n']:.4g} Pa/m, "
                      f"search radius {pd['radius']:.4g} m, {spec.sliding} sliding ({_searched(spec)}); {rows} "
-                     f"candidate rows at the start")
+                     f"candidate rows at the first search")
     for dd, term in zip(model.dies, terms[len(model.pairs):]):
         spec = dd["spec"]
         rows = mesh.comm.allreduce(len(term.rows), op=MPI.SUM)
         lines.append(f"die[{dd['index']}] {spec.name}: rigid plane, {spec.condition}, on {', '.join(spec.surfaces)}; "
-                     f"eps_n {dd['eps_n']:.4g} Pa/m; {rows} candidate rows at the start")
+                     f"eps_n {dd['eps_n']:.4g} Pa/m; {rows} candidate rows at the first search")
     model.destroy()
     template.destroy()
     return lines
