@@ -346,6 +346,9 @@ def distribute_mesh(scene, comm):
     partitioner = dm.getPartitioner()
     partitioner.setOptionsPrefix("qsc_")      # -qsc_petscpartitioner_type simple|ptscotch|parmetis|...
     chosen = option_value("petscpartitioner_type")
+    if chosen == "shell":     # its partition comes through the API: PETSc stopped with error 62 inside distribute
+        raise SceneError("-qsc_petscpartitioner_type: 'shell' takes its partition from a program, not an option; "
+                         "leave the option out for qsc's coordinate bisection, or name ptscotch or simple")
     if comm.size > 1 and chosen is None:
         # the default: coordinate bisection of the cells, all of which start on rank 0
         if comm.rank == 0:

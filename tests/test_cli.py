@@ -211,6 +211,12 @@ def _unavailable_partitioner(tmp):
                                                                           "parmetis", "not available"]
 
 
+def _shell_partitioner(tmp):
+    # takes its partition through the API: PETSc stopped inside DMPlexDistribute with a traceback per rank
+    return [block_scene(tmp), "-qsc_petscpartitioner_type", "shell"], ["-qsc_petscpartitioner_type", "'shell'",
+                                                                       "coordinate bisection"]
+
+
 def _huge_box(tmp):
     # refused before any array is made (the box would not fit in memory either)
     return [block_scene(tmp, mesh='type = "box", size = [1.0, 1.0, 1.0], cells = [2000, 2000, 2000]')], [
@@ -259,8 +265,8 @@ def _result_name_taken(tmp):
 
 BAD_INPUT = [_unknown_key, _wrong_type, _negative_modulus, _missing_mesh_file, _unknown_box_surface,
              _unknown_file_surface, _not_a_mesh, _unknown_set_path, _set_missing_entry, _unavailable_partitioner,
-             _huge_box, _body_too_small, _pressure_not_finite, _pressure_out_of_range, _conflicting_boundaries,
-             _negative_tolerance, _snes_without_newton_test, _result_name_taken]
+             _shell_partitioner, _huge_box, _body_too_small, _pressure_not_finite, _pressure_out_of_range,
+             _conflicting_boundaries, _negative_tolerance, _snes_without_newton_test, _result_name_taken]
 SERIAL_OK = {_unavailable_partitioner}     # cases that only fail in parallel
 
 
