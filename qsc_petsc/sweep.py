@@ -38,16 +38,17 @@ class SweepInputError(QscError):
 # ---------------------------------------------------------------- arguments
 
 def split_values(text):
-    """Split v1,v2,... on the commas outside brackets and quotes: "[2,2,1],[4,4,2]" -> ["[2,2,1]", "[4,4,2]"]."""
+    """Split v1,v2,... on the commas outside brackets, parentheses and quotes: "[2,2,1],[4,4,2]" -> ["[2,2,1]",
+    "[4,4,2]"], "1,maximum(x,0.5)" -> ["1", "maximum(x,0.5)"]."""
     out, depth, quote, cur = [], 0, None, []
     for ch in text:
         if quote:
             quote = None if ch == quote else quote
         elif ch in "\"'":
             quote = ch
-        elif ch in "[{":
+        elif ch in "[{(":
             depth += 1
-        elif ch in "]}":
+        elif ch in "]})":
             depth -= 1
         elif ch == "," and depth == 0:
             out.append("".join(cur).strip())
@@ -480,15 +481,23 @@ def plot_pareto(plan, rows, path):
     plt.close(fig)
 
 
-def write_outputs(plan, rows, command):
-    """sweep.csv, sweep.md and pareto.png into the output folder; marks the Pareto rows first."""
+def mark_pareto(rows):
+    """Set each row's "plotted" (a finished comparison with a run time) and "pareto" (on the front of run time
+    against displacement error among the plotted rows) afresh: the outputs are rewritten after every run, and a row
+    on an earlier front may be beaten by a later run."""
     for r in rows:
         e = (r.get("errors") or {}).get("displacement_l2")
         r["plotted"] = (r["status"] == "ok" and not r.get("is_reference") and e is not None and math.isfinite(e)
                         and e > 0 and run_seconds(r))
+        r["pareto"] = False
     eligible = [r for r in rows if r["plotted"]]
     for i in pareto_front([(run_seconds(r), r["errors"]["displacement_l2"]) for r in eligible]):
         eligible[i]["pareto"] = True
+
+
+def write_outputs(plan, rows, command):
+    """sweep.csv, sweep.md and pareto.png into the output folder; marks the Pareto rows first."""
+    mark_pareto(rows)
     header, body = csv_rows(plan, rows)
     buf = io.StringIO()
     writer = csv.writer(buf, lineterminator="\n")

@@ -13,7 +13,7 @@ from conftest import CONFIGS
 from mpi4py import MPI
 
 from qsc_petsc import cli
-from qsc_petsc.sweep import SweepInputError, pareto_front, parse_variation, split_values
+from qsc_petsc.sweep import SweepInputError, mark_pareto, pareto_front, parse_variation, split_values
 
 pytestmark = pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="starts MPI jobs itself: serial suite only")
 
@@ -36,12 +36,26 @@ def read_csv(path):
 def test_values_split_outside_brackets():
     assert split_values("[2,2,1],[4,4,2]") == ["[2,2,1]", "[4,4,2]"]
     assert split_values('1e2, 1e4,"a,b"') == ["1e2", "1e4", '"a,b"']
+    assert split_values("1,maximum(x,0.5)") == ["1", "maximum(x,0.5)"]      # an expression's arguments stay whole
     v = parse_variation("-qsc_pc_type=gamg,hypre,lu", "--vary", "ranks")
     assert (v.kind, v.values) == ("petsc", ["gamg", "hypre", "lu"])
     assert parse_variation("ranks=1,2", "--vary", "ranks").kind == "ranks"
     for bad in ("contact.0.penalty", "=1,2", "ranks=0,2", "contact.0.penalty=1e2,,1e4", "-qsc pc=1,2", "a=1,1"):
         with pytest.raises(SweepInputError):
             parse_variation(bad, "--vary", "ranks")
+
+
+def test_pareto_marks_follow_the_later_runs():
+    """The outputs are rewritten after every run: a row on the front after the first runs shall lose its mark once
+    a later run is both faster and more accurate (it kept it: the sweep marked beaten runs as non-dominated)."""
+    def row(seconds, error):
+        return {"status": "ok", "time": {"solve": seconds}, "errors": {"displacement_l2": error}}
+    rows = [row(0.0112, 3.15e-11), row(0.0116, 3.97e-12)]
+    mark_pareto(rows)
+    assert [r["pareto"] for r in rows] == [True, True]
+    rows.append(row(0.0107, 3.06e-13))              # faster and more accurate than both
+    mark_pareto(rows)
+    assert [r["pareto"] for r in rows] == [False, False, True]
 
 
 def test_pareto_front():
