@@ -334,8 +334,7 @@ class Run:
         in_effect = self.summary["petsc_options"] = options.options_in_effect()
         self.write_summary()
         path = self.out / "petsc_options.txt"
-        system = getattr(self, "system", None)
-        settings = system.settings() if system is not None else ()
+        settings = self.system.settings()          # execute runs only on a built Run: the system exists
         write_on_root(self.comm, path,
                       lambda: path.write_text(options.options_text(in_effect, self.from_scene, settings)))
 

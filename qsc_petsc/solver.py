@@ -231,12 +231,12 @@ class System:
         # the Newton test's force scale leaves the Dirichlet rows out: they hold u_i - t ubar_i (metres, diagonal 1),
         # which outweighed every force in a soft or small body (E = 1e-12 Pa, or a box 1e-20 m wide, driven by a
         # prescribed displacement: "converged" at once with every free node at rest)
+        self.bc_local = (bc_dofs - self.u.getOwnershipRange()[0]).astype(np.int64)
         self.free_local = np.ones(self.u.getLocalSize(), dtype=bool)
-        self.free_local[bc_dofs - self.u.getOwnershipRange()[0]] = False
+        self.free_local[self.bc_local] = False
         self.b_norm = self._free_norm(self.b)
         K.setNearNullSpace(nullspace)
         self.K = K
-        self.bc_local = (bc_dofs - self.u.getOwnershipRange()[0]).astype(np.int64)
         self.bc_dofs = bc_dofs.astype(PETSc.IntType)
         self.terms = []
         self.J = K
