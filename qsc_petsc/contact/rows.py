@@ -123,13 +123,14 @@ class Pass:
     def from_search(node, area, size, found, face_nodes, face_size):
         """The Pass of the points that found a face: found is search.closest_faces' dict for points `node`.
 
-        face_nodes (m, nv) global vertex ids and face_size (m,) of the faces given to the search.
+        face_nodes (m, nv) global vertex ids and face_size (m,) of the faces given to the search; a point's area
+        is scaled by its edge_factor.
         """
         f = np.asarray(found["face"])
         ok = f >= 0
         fo = f[ok]
-        return Pass(node=np.asarray(node)[ok], area=np.asarray(area)[ok], size=np.asarray(size)[ok],
-                    target_nodes=np.asarray(face_nodes)[fo], shape=found["shape"][ok],
+        return Pass(node=np.asarray(node)[ok], area=np.asarray(area)[ok] * found["edge_factor"][ok],
+                    size=np.asarray(size)[ok], target_nodes=np.asarray(face_nodes)[fo], shape=found["shape"][ok],
                     normal=found["normal"][ok], delta0=found["signed_gap"][ok],
                     target_size=np.asarray(face_size)[fo])
 

@@ -13,6 +13,10 @@ from qsc_petsc.contact.geometry import _dot, project_on_faces
 
 # distances equal within TIE_TOL * (face size) are a tie, decided by the face key
 TIE_TOL = 1e-9
+# closest_faces' edge band: points within this fraction of it past an edge keep their whole weight (a point on
+# a symmetry plane beside a curved surface's edge lies ~1e-5 of the band off it, one over a convex kink with a
+# small gap lies gap x sin(kink / 2) off)
+EDGE_FULL = 0.1
 # a face may cover this many grid cells on average before the cells are made coarser
 _MAX_CELLS_PER_FACE = 27
 
@@ -93,14 +97,26 @@ def candidate_pairs(points, face_min, face_max, radius):
     return pair_point[srt].astype(np.int64), pair_face[srt].astype(np.int64)
 
 
-def closest_faces(points, face_xyz, face_type, face_key, radius):
+def closest_faces(points, face_xyz, face_type, face_key, radius, band=None):
     """The face each point projects on: the nearest within radius, ties broken by the smallest face_key row.
 
     points (p, 3); face_xyz (m, nv, 3); face_key (m, k) int64, e.g. each face's
     sorted global vertex ids (partition independent). Returns a dict of (p, ...)
     arrays: face (index into the given faces, -1 if none within radius), xi,
     shape, closest, normal (the face's outward normal at xi), distance,
-    signed_gap = (point - closest) . normal (>= 0 when apart), inside.
+    signed_gap = (point - closest) . normal (>= 0 when apart), inside,
+    edge_factor.
+
+    band (p,) [m] or None: the edge band. A point whose closest point is on its
+    face's edge with the point beyond it (not inside: it has slid past the
+    surface's edge, or sits over a convex kink) lies off the face's normal by
+    the in-plane distance d = |(point - closest) minus its normal part|; its
+    edge_factor is 1 up to d = EDGE_FULL band, falls linearly to 0 at d = band,
+    and a point with d >= band meets no face.
+    A row of such a point would hold it against the face's plane extended past
+    the edge, whose tilt times d moved its gap between searches by far more than
+    the penetrations (formulation.md section 6; large sliding did not settle).
+    edge_factor is 1 for inside points and without band, 0 where no face.
     """
     points = np.asarray(points, dtype=float).reshape(-1, 3)
     face_xyz = np.asarray(face_xyz, dtype=float)
@@ -115,7 +131,7 @@ def closest_faces(points, face_xyz, face_type, face_key, radius):
     p = len(points)
     out = {"face": np.full(p, -1, dtype=np.int64), "xi": np.zeros((p, 2)), "shape": np.zeros((p, nv)),
            "closest": np.full((p, 3), np.nan), "normal": np.zeros((p, 3)), "distance": np.full(p, np.inf),
-           "signed_gap": np.full(p, np.inf), "inside": np.zeros(p, dtype=bool)}
+           "signed_gap": np.full(p, np.inf), "inside": np.zeros(p, dtype=bool), "edge_factor": np.zeros(p)}
     if p == 0 or len(face_xyz) == 0:
         return out
 
@@ -145,4 +161,14 @@ def closest_faces(points, face_xyz, face_type, face_key, radius):
     out["distance"][who] = proj.distance[s]
     out["signed_gap"][who] = _dot(points[who] - proj.closest[s], proj.normal[s])
     out["inside"][who] = proj.inside[s]
+    out["edge_factor"][who] = 1.0
+    off = who[~proj.inside[s]]
+    if band is not None and len(off):
+        r = points[off] - out["closest"][off]
+        n = out["normal"][off]
+        r_plane = r - _dot(r, n)[:, None] * n
+        b = np.broadcast_to(band, (p,))[off]
+        factor = (b - np.sqrt(_dot(r_plane, r_plane))) / ((1.0 - EDGE_FULL) * b)
+        out["edge_factor"][off] = np.clip(factor, 0.0, 1.0)
+        out["face"][off[factor <= 0.0]] = -1
     return out
