@@ -393,9 +393,12 @@ class System:
         # G^T G of every term (the terms keep the product for their Jacobians): the Jacobian's contact stencil,
         # and the contact pairs' band for the preconditioner
         stencils = [term.stencil() for term in terms]
-        # a die's rows act on one node each: its stencil is inside K's pattern already
-        pairs = [term for term in terms if not term.node_local]
-        coupling = [GtG for term, GtG in zip(terms, stencils) if not term.node_local]
+        # a die's rows act on one node each: its stencil is inside K's pattern already; a pair whose search found
+        # nothing (its surfaces came apart) couples nothing (and MatAXPY of its empty stencil into J left J
+        # with values PETSc's LU read as a zero pivot)
+        counts = self.comm.allreduce(np.array([len(term.rows) for term in terms], dtype=np.int64), op=MPI.SUM)
+        pairs = [term for term, n in zip(terms, counts) if not term.node_local and n]
+        coupling = [GtG for term, GtG, n in zip(terms, stencils, counts) if not term.node_local and n]
         signature = [term.stencil_digest() for term in pairs]
         kept = bool(terms) and self.J is not self.K and self.comm.allreduce(signature == self.stencil_signature,
                                                                              op=MPI.LAND)

@@ -209,8 +209,12 @@ def die_data(mesh, scene, template):
 MIN_RELAXATION = 0.1
 MAX_RELAXATION = 5.0
 # sliding = "small" is said to be out of its range once a pressed node faces an opposite material point
-# this many h_eff from the one it faced at u = 0 (ContactModel.slip_warnings)
+# this many h_eff from the one it faced at u = 0, and finite sliding once it has in one step (ContactModel.slip_warnings)
 SLIP_WARNING = 0.5
+# finite sliding is also said to be out of its range when nodes facing nothing of the other surface carry this share
+# of a pair's normal force (0.04-0.07 where large sliding settled on configs/sliding_cubes.toml: master nodes past
+# the slave's edge that its rows press; 0.61-1.0 where a 1.2 m slide in two steps had left the lower cube)
+UNFACED_WARNING = 0.5
 
 
 class ContactModel:
@@ -224,7 +228,10 @@ class ContactModel:
         self.dies = die_data(mesh, scene, template)
         self.current = []
         self.faced_at_start = {}   # (pair, side): the opposite material point each node faced at u = 0 (report)
+        self.faced_last = {}       # (pair, side): the same at the last report
         self.slip_warned = set()
+        self.met = set()           # the pairs whose surfaces a search has found within reach (_check_found)
+        self.apart = set()         # the pairs last said to have no rows (slip_warnings)
         # per pair (report): the load factor of the search that made its rows, whether the last search kept an
         # earlier search's, the last search's _gap_change, and the searches of the last increment
         self.searches = {f"contact[{pd['index']}]": {"load_factor": 0.0, "gap_change": None, "kept": False, "count": 0}
@@ -433,11 +440,14 @@ class ContactModel:
         return (*G, *g, *W)
 
     def _check_found(self, pd, sp, mp):
-        """Surfaces declared in contact must meet within the search distance somewhere (all ranks agree).
+        """Surfaces declared in contact must meet within the search distance somewhere at the pair's first search
+        (all ranks agree); a later search that finds nothing has surfaces that came apart (no rows).
 
         Returns the number of points projected (both passes, all ranks)."""
         found = self.comm.allreduce(len(sp.node) + (len(mp.node) if mp is not None else 0), op=MPI.SUM)
-        if found == 0:
+        if found:
+            self.met.add(pd["index"])
+        elif pd["index"] not in self.met:
             spec = pd["spec"]
             raise SceneError(f"contact[{pd['index']}]: no node of {spec.slave!r} or {spec.master!r} is within the "
                              f"search distance ({pd['radius']:.3g} m = search_distance x element size) of the "
@@ -472,13 +482,14 @@ class ContactModel:
                      "gap_change": _finite_or_none(self.searches[term.name]["gap_change"])}
             W = term.W.getArray()[term.rows]
             entry["contact_area"] = self.comm.allreduce(float(term.phi * W[term.active].sum()), op=MPI.SUM)
-            mean_pen = {}
+            mean_pen, pressed_unfaced, unfaced_force, step_slip = {}, 0, {}, 0.0
             for side, S, T in (("slave", pd["slave"], pd["master"]), ("master", pd["master"], pd["slave"])):
                 _, ok, found = project_pass(mesh, S, T, X, U, pd["radius"])
                 v = S.nodes[ok]
                 h = -found["signed_gap"][ok]          # penetration in the current configuration
                 p_own = np.einsum("pi,pi->p", F[_owned_rows(mesh, S.nodes)], S.normal) / S.area
                 entry[f"max_slip_{side}"] = self._max_slip(pd, side, S, T, ok & (p_own > 0), found)
+                step_slip = max(step_slip, self._max_slip(pd, side, S, T, ok & (p_own > 0), found, since="report"))
                 traction[S.nodes, 0] = p_own
                 penetration[v, 0] = h
                 # touching: penetrating, or carrying contact force (rows linearised at an increment's start can
@@ -486,9 +497,13 @@ class ContactModel:
                 touching = (h >= -self.scene.solver.active_set_tolerance * pd["h_eff"]) | (p_own[ok] > 0)
                 status[v, 0] = touching.astype(float)
                 # a node beyond the opposite surface's edge that its neighbours' rows still press carries force too
-                status[S.nodes[~ok & (p_own > 0)], 0] = 1.0
+                unfaced = ~ok & (p_own > 0)
+                status[S.nodes[unfaced], 0] = 1.0
+                pressed_unfaced += self.comm.allreduce(int(unfaced.sum()), op=MPI.SUM)
+                unfaced_force[side] = self.comm.allreduce(float((p_own * S.area)[unfaced].sum()), op=MPI.SUM)
                 force = self.comm.allreduce(-F[_owned_rows(mesh, S.nodes)].sum(axis=0), op=MPI.SUM)
-                entry[f"max_penetration_{side}"] = self.comm.allreduce(float(h.max(initial=-np.inf)), op=MPI.MAX)
+                entry[f"max_penetration_{side}"] = _finite_or_none(
+                    self.comm.allreduce(float(h.max(initial=-np.inf)), op=MPI.MAX))     # None: no node faces T
                 a = S.area[ok]
                 mean_pen[side] = (self.comm.allreduce(float((a * h).sum()), op=MPI.SUM),
                                   self.comm.allreduce(float(a.sum()), op=MPI.SUM))
@@ -499,6 +514,11 @@ class ContactModel:
             mm = mean_pen["master"][0] / max(mean_pen["master"][1], 1e-300)
             entry["mean_penetration_slave"], entry["mean_penetration_master"] = ms, mm
             entry["swap_indicator"] = abs(ms - mm) / max(abs(ms), abs(mm), 1e-300)
+            entry["max_slip_step"] = step_slip
+            entry["pressed_unfaced_nodes"] = pressed_unfaced
+            # the share of the slave's normal force those nodes carry (slave side; master side if larger)
+            entry["pressed_unfaced_share"] = max(unfaced_force["slave"] / max(entry["total_normal_force"], 1e-300),
+                                                 unfaced_force["master"] / max(entry["total_normal_force"], 1e-300))
             summaries[f"contact[{pd['index']}] {pd['spec'].slave} / {pd['spec'].master}"] = entry
         for dd in self.dies:
             term = terms[f"die[{dd['index']}]"]
@@ -517,18 +537,33 @@ class ContactModel:
                 "rows": self.comm.allreduce(len(term.rows), op=MPI.SUM),
                 "active_rows": self.comm.allreduce(int(term.active.sum()), op=MPI.SUM),
                 "eps_n": dd["eps_n"], "force_on_bodies": force.tolist(),
-                "max_penetration": self.comm.allreduce(float(h.max(initial=-np.inf)), op=MPI.MAX),
+                "max_penetration": _finite_or_none(self.comm.allreduce(float(h.max(initial=-np.inf)), op=MPI.MAX)),
                 "contact_area": self.comm.allreduce(float(term.W.getArray()[term.rows][normal].sum()),
                                                     op=MPI.SUM)}
         fields = {"contact_traction": traction, "contact_penetration": penetration, "contact_status": status}
         return fields, summaries
 
     def slip_warnings(self, summaries):
-        """One line per small-sliding pair whose contact slid farther than SLIP_WARNING x h_eff (report's
-        max_slip_*), the first time it does."""
+        """Lines on the pairs' state after a step (report's summaries): a small-sliding pair whose contact slid
+        farther than SLIP_WARNING x h_eff (max_slip_*), a pair whose pressed nodes face nothing of the other
+        surface (the rows of an earlier configuration hold them: small or finite sliding), each the first time;
+        a pair whose search found the surfaces out of reach (no rows), when it starts to."""
         lines = []
         for pd, entry in zip(self.pairs, summaries.values()):
             spec, name = pd["spec"], f"contact[{pd['index']}]"
+            if entry["rows"] == 0 and name not in self.apart:
+                lines.append(f"{name}: no point of either surface is within the search distance "
+                             f"({pd['radius']:.3g} m) of the other: the surfaces have come apart (no rows, no force)")
+            (self.apart.add if entry["rows"] == 0 else self.apart.discard)(name)
+            share, slid = entry["pressed_unfaced_share"], entry["max_slip_step"]
+            if spec.sliding == "finite" and (name, "step") not in self.slip_warned and (
+                    slid > SLIP_WARNING * pd["h_eff"] or share > UNFACED_WARNING):
+                self.slip_warned.add((name, "step"))
+                what = (f"slid {slid:.3g} m = {slid / pd['h_eff']:.2g} h_eff in this step" if share <= UNFACED_WARNING
+                        else f"left nodes that carry {share:.0%} of its normal force facing no part of the other "
+                             f"surface")
+                lines.append(f"{name}: the contact {what}; finite sliding keeps the rows searched at the step's "
+                             f"start, whose error grows with that: use more load steps or sliding = \"large\"")
             slip = max(entry["max_slip_slave"], entry["max_slip_master"])
             if spec.sliding == "small" and slip > SLIP_WARNING * pd["h_eff"] and name not in self.slip_warned:
                 self.slip_warned.add(name)
@@ -537,16 +572,21 @@ class ContactModel:
                              f"configuration: use sliding = \"finite\" for this scene")
         return lines
 
-    def _max_slip(self, pd, side, S, T, pressed, found):
+    def _max_slip(self, pd, side, S, T, pressed, found, since="start"):
         """The largest distance, over S's pressed nodes (found on T now, with a positive contact traction), between
-        the T material point a node faces now and the one it faced at u = 0 (both in T's reference
-        configuration): how far the contact slid [m]; all ranks."""
+        the T material point a node faces now and the one it faced at u = 0 (since="start"), or at the last
+        report (since="report": the last step's end, where finite sliding searched the rows of this one; u = 0
+        at the first), both in T's reference configuration: how far the contact slid [m]; all ranks."""
         key = (pd["index"], side)
         if key not in self.faced_at_start:
             _, ok0, found0 = project_pass(self.mesh, S, T, self.mesh.coords, np.zeros_like(self.mesh.coords),
                                           pd["radius"])
             self.faced_at_start[key] = (ok0, found0["target_ref"])
-        ok0, start = self.faced_at_start[key]
+        if since == "report":
+            ok0, start = self.faced_last.get(key, self.faced_at_start[key])
+            self.faced_last[key] = (found["face"] >= 0, found["target_ref"])
+        else:
+            ok0, start = self.faced_at_start[key]
         both = pressed & ok0
         slip = np.linalg.norm(found["target_ref"][both] - start[both], axis=1)
         return self.comm.allreduce(float(slip.max(initial=0.0)), op=MPI.MAX)
@@ -563,18 +603,25 @@ def _gap_change(last, new, u):
     of their gaps c / w over the rows, relative to the largest penetration of the new rows, a / eps_n with the
     row pressure a = lmbda + eps_n c / w of penalty.row_response (the augmented Lagrangian's multipliers
     lmbda, the last term's, count: its pressure is carried at a near-zero gap); inf when the two searches made
-    different rows, or nothing presses and some gap changed. eps_n x this is the pressure error that keeping
+    different rows, or nothing presses on the new rows but something did on the last; 0 when nothing presses on
+    either. eps_n x this is the pressure error that keeping
     the last rows makes at u, relative to the largest contact pressure."""
     comm = new.G.getComm().tompi4py()
     if not comm.allreduce(np.array_equal(last.rows, new.rows), op=MPI.LAND):
         return np.inf
     gaps = [term.row_values(u) / term.W.getArray()[term.rows] for term in (last, new)]
     change = comm.allreduce(float(np.abs(gaps[0] - gaps[1]).max(initial=0.0)), op=MPI.MAX)
-    held = gaps[1] + (last.lmbda / new.eps_n if last.lmbda is not None else 0.0)
+    carried = last.lmbda / new.eps_n if last.lmbda is not None else 0.0
+    held = gaps[1] + carried
     depth = comm.allreduce(float(held.max(initial=0.0)), op=MPI.MAX)
     if change == 0.0:
         return 0.0
-    return change / depth if depth > 0 else np.inf
+    if depth > 0:
+        return change / depth
+    # nothing presses on the new rows: keeping the last ones makes no pressure error if nothing presses on them
+    # either (an open gap's rows changed by round-off, or the surfaces lifted off)
+    pressed_last = comm.allreduce(float((gaps[0] + carried).max(initial=0.0)), op=MPI.MAX)
+    return 0.0 if pressed_last <= 0 else np.inf
 
 
 def _searched(spec):
