@@ -16,7 +16,7 @@ from petsc4py import PETSc
 
 from . import fem
 from .errors import MeshError, QscError, SceneError
-from .meshgen import box_mesh, read_mesh_file
+from .meshgen import box_mesh, cell_pieces, read_mesh_file
 from .options import option_value
 from .partition import cell_centroids, coordinate_bisection
 
@@ -37,6 +37,8 @@ class GlobalMesh:
     cell_body: np.ndarray       # (m,) body index
     face_mask: np.ndarray       # (m, faces per cell) int64 bitmask over surface indices
     surface_names: list         # "body.surface", index = bit
+    cell_piece: np.ndarray = None   # (m,) connected piece (index into piece_names)
+    piece_names: list = None    # a body's name, or "body piece k of n (around x, y, z)" for a body in pieces
 
 
 @dataclass
@@ -59,6 +61,8 @@ class LocalMesh:
     n_vertices: int             # global
     n_cells: int                # global
     vertex_range: tuple         # owned global vertex numbers [start, end)
+    cell_piece: np.ndarray = None   # (nc,) connected piece (GlobalMesh.piece_names)
+    piece_names: list = None
     partitioner: str = "none"   # what distributed the cells: "coordinate bisection" or PETSc's partitioner type
     _surface_vertices: dict = field(default_factory=dict)
 
@@ -124,6 +128,14 @@ class LocalMesh:
         body = np.full(len(self.coords), -1, dtype=self.cell_body.dtype)
         body[self.cells] = self.cell_body[:, None]
         return body
+
+    @cached_property
+    def vertex_piece(self):
+        """Connected piece of each local vertex (a body's pieces share no vertex; -1 for a vertex in no local
+        cell): what must be held, one rigid body each (restraint)."""
+        piece = np.full(len(self.coords), -1, dtype=np.int64)
+        piece[self.cells] = self.cell_piece[:, None]
+        return piece
 
     def body_mask(self, body):
         """Whether each local vertex belongs to a body (a mask needs no sorted vertex list)."""
@@ -223,7 +235,7 @@ def check_size(scene, comm, available=available_memory):
 
 def build_global_mesh(scene):
     """Generate or read every body and merge them into one vertex/cell numbering (rank 0)."""
-    points, cells, bodies, masks, names = [], [], [], [], []
+    points, cells, bodies, masks, names, pieces, piece_names = [], [], [], [], [], [], []
     offset, cell_types = 0, set()
     for b, body in enumerate(scene.bodies):
         spec = body.mesh
@@ -246,13 +258,23 @@ def build_global_mesh(scene):
                 raise MeshError(f"bodies[{b}].mesh: more than {MAX_SURFACES} named surfaces in the scene")
             names.append(f"{body.name}.{sname}")
             mask[cf[:, 0], cf[:, 1]] |= np.int64(1) << np.int64(bit)
+        # a body read from a file may come in several unconnected pieces, each needing its own hold
+        piece, n_pieces = (np.zeros(len(bm.cells), np.int64), 1) if spec.type == "box" else \
+            cell_pieces(bm.cells, len(bm.points))
+        pieces.append(piece + len(piece_names))
+        if n_pieces == 1:
+            piece_names.append(body.name)
+        for k in range(n_pieces if n_pieces > 1 else 0):
+            centre = bm.points[np.unique(bm.cells[piece == k])].mean(axis=0)
+            piece_names.append(f"{body.name} piece {k + 1} of {n_pieces} (around "
+                               f"{', '.join(f'{c:.3g}' for c in centre)})")
         points.append(bm.points)
         cells.append(bm.cells + offset)
         bodies.append(np.full(len(bm.cells), b))
         masks.append(mask)
         offset += len(bm.points)
     return GlobalMesh(np.concatenate(points), np.concatenate(cells), cell_types.pop(),
-                      np.concatenate(bodies), np.concatenate(masks), names)
+                      np.concatenate(bodies), np.concatenate(masks), names, np.concatenate(pieces), piece_names)
 
 
 def _check_extent(index, spec, points):
@@ -299,9 +321,9 @@ def distribute_mesh(scene, comm):
     """Build, label and distribute the scene's mesh; return this rank's LocalMesh."""
     check_size(scene, comm)
     gm = on_root(comm, lambda: build_global_mesh(scene))
-    header = comm.bcast((gm.cell_type, gm.surface_names, len(gm.points), len(gm.cells))
+    header = comm.bcast((gm.cell_type, gm.surface_names, len(gm.points), len(gm.cells), gm.piece_names)
                         if comm.rank == 0 else None, root=0)
-    cell_type, surface_names, n_vertices, n_cells = header
+    cell_type, surface_names, n_vertices, n_cells, piece_names = header
     check_surface_references(scene, surface_names)
     nn = fem.CELL_NODES[cell_type]
     nf = len(fem.CELL_FACES[cell_type])
@@ -335,12 +357,13 @@ def distribute_mesh(scene, comm):
             dm.getLabel(name).setStratumIS(1, PETSc.IS().createGeneral(verts, comm=PETSc.COMM_SELF))
 
     pstart, pend = dm.getChart()
-    root = np.full((pend - pstart, nn + nf + 2), -1, dtype=np.int64)
+    root = np.full((pend - pstart, nn + nf + 3), -1, dtype=np.int64)
     if comm.rank == 0:
         root[c0:c1, :nn] = gm.cells
         root[c0:c1, nn:nn + nf] = gm.face_mask
         root[c0:c1, nn + nf] = gm.cell_body
         root[c0:c1, nn + nf + 1] = np.arange(n_cells)
+        root[c0:c1, nn + nf + 2] = gm.cell_piece
         root[v0:v1, 0] = np.arange(n_vertices)
 
     partitioner = dm.getPartitioner()
@@ -404,6 +427,7 @@ def distribute_mesh(scene, comm):
         coords=dm.getCoordinatesLocal().getArray().reshape(-1, 3).copy(),
         cells=np.ascontiguousarray(local_cells), cell_body=leaf[c0:c1, nn + nf].copy(),
         cell_orig=leaf[c0:c1, nn + nf + 1].copy(), face_mask=leaf[c0:c1, nn:nn + nf].copy(),
+        cell_piece=leaf[c0:c1, nn + nf + 2].copy(), piece_names=piece_names,
         vert_orig=vert_orig, gvert=gvert, owned=owned, owner=owner,
         n_vertices=n_vertices, n_cells=n_cells, vertex_range=(vstart, vstart + n_owned),
         partitioner=(chosen or "coordinate bisection") if comm.size > 1 else "none")

@@ -122,6 +122,32 @@ def _row_ids(rows, n):
     return ids
 
 
+def cell_pieces(cells, n_points):
+    """The connected pieces of a mesh (cells sharing a vertex are connected): (piece of each cell (m,), number of
+    pieces), pieces numbered by their first cell. Label propagation with pointer jumping, vectorised."""
+    cells = np.asarray(cells, np.int64)
+    if len(cells) == 0:
+        return np.zeros(0, np.int64), 0
+    label = np.arange(n_points, dtype=np.int64)
+    while True:
+        low = label[cells].min(axis=1)
+        new = label.copy()
+        for col in cells.T:                       # every vertex takes the lowest label of its cells
+            np.minimum.at(new, col, low)
+        while True:                               # and its label's label, to a fixed point
+            jumped = new[new]
+            if np.array_equal(jumped, new):
+                break
+            new = jumped
+        if np.array_equal(new, label):
+            break
+        label = new
+    _, first, piece = np.unique(label[cells[:, 0]], return_index=True, return_inverse=True)
+    rank = np.empty(len(first), np.int64)
+    rank[np.argsort(first)] = np.arange(len(first))
+    return rank[piece], len(first)
+
+
 def boundary_faces(cell_type, cells):
     """(cell, local face) rows (k, 2) of every face that belongs to one cell only."""
     cells = np.asarray(cells, np.int64)
@@ -204,6 +230,13 @@ def read_mesh_file(path, scale=1.0):
     if points.ndim != 2 or points.shape[1] != 3:
         raise MeshError(f"mesh file {path}: points must be 3D, got shape {points.shape}")
     cells = np.concatenate([b.data for b in mesh.cells if b.type == mtype]).astype(np.int64)
+    # gmsh's msh2 lists an element once per physical volume it belongs to: a cell counted twice would add its
+    # stiffness twice (an inner region tagged apart inside the whole: 9.8 % off in displacement, no warning)
+    _, first = np.unique(_row_ids(np.sort(cells, axis=1), len(points)), return_index=True)
+    if len(first) < len(cells):
+        sys.stdout.write(f"qsc: mesh file {path}: {len(cells) - len(first)} of {len(cells)} {mtype} cells are listed "
+                         f"more than once (msh2 writes an element once per physical volume): each is used once\n")
+        cells = cells[np.sort(first)]
     cells = _orient(cell_type, points, cells)
 
     boundary = boundary_faces(cell_type, cells)

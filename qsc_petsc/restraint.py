@@ -1,4 +1,5 @@
-"""Which rigid-body motions of the bodies no displacement boundary and no contact row holds (every body must be held).
+"""Which rigid-body motions of the bodies no displacement boundary and no contact row holds (every body must be held;
+a body read from a file in several unconnected pieces, every piece).
 
 A body that nothing holds in some direction makes the Jacobian singular. A direct solver
 then returns one of infinitely many answers, picked by round-off (a silent wrong
@@ -57,12 +58,13 @@ class Restraint:
 
     def __init__(self, mesh, bc_dofs, template):
         comm = mesh.comm
-        self.comm, self.names = comm, list(mesh.body_names)
+        # one rigid body per connected piece: a body read from a file may come in several (LocalMesh.vertex_piece)
+        self.comm, self.names = comm, list(mesh.piece_names)
         self.mesh, self.sizes = mesh, template.getSizes()
         owned = mesh.owned_rows              # dof 3 r + c of this rank is component c of vertex owned[r]
         self.frames = []            # per body: the centre [m] and length [m] its rotations are taken with
         for b in range(len(self.names)):
-            x = mesh.coords[owned[mesh.vertex_body[owned] == b]]
+            x = mesh.coords[owned[mesh.vertex_piece[owned] == b]]
             lo, hi = np.empty(3), np.empty(3)
             comm.Allreduce(x.min(axis=0) if len(x) else np.full(3, np.inf), lo, op=MPI.MIN)
             comm.Allreduce(x.max(axis=0) if len(x) else np.full(3, -np.inf), hi, op=MPI.MAX)
@@ -77,7 +79,7 @@ class Restraint:
     def _velocities(self, vertices, components):
         """Rows (k, 6 nb) of the motions at the given components of local vertices: each body's six, zero elsewhere."""
         out = np.zeros((len(vertices), 6 * len(self.names)))
-        body = self.mesh.vertex_body[vertices]
+        body = self.mesh.vertex_piece[vertices]
         for b, (centre, length) in enumerate(self.frames):
             sel = np.flatnonzero(body == b)
             # rotations at unit speed at distance `length` from the centre: every motion's rows of one size

@@ -378,6 +378,36 @@ def test_check_finds_a_free_body(tmp_path, ranks):
                                          "translation y, rotation about z)"), out
 
 
+@pytest.mark.parametrize("ranks", RANKS)
+def test_a_body_in_unconnected_pieces_must_hold_each(tmp_path, ranks):
+    """A body read from a file in two unconnected pieces (two unit cubes 1 m apart), only the first one's base
+    clamped: the hold check took the six rigid motions per body, so check said valid and direct solvers returned
+    an arbitrary position for the free cube with exit 0 (helper pass, session 25). Each piece is held on its own
+    now: the second is named (with where it is) in the run's exit-2 line, and clamping both bases solves."""
+    cube = box_mesh((0.0, 0.0, 0.0), (1.0, 1.0, 1.0), (2, 2, 2), "tet")
+    points = np.vstack([cube.points, cube.points + [2.0, 0.0, 0.0]])
+    cells = np.vstack([cube.cells, cube.cells + len(cube.points)])
+    rows = cube.surfaces["zmin"]
+    bottoms = fem.cell_faces("tet", cube.cells[rows[:, 0]], rows[:, 1])
+    blocks = [("tetra", cells), ("triangle", bottoms), ("triangle", bottoms + len(cube.points))]
+    tags = [np.full(len(cells), 100), np.full(len(bottoms), 1), np.full(len(bottoms), 2)]
+    meshio.write(tmp_path / "two.msh", meshio.Mesh(points, blocks, cell_data={"gmsh:physical": tags,
+                                                                               "gmsh:geometrical": tags},
+                                                   field_data={"base": np.array([1, 2]), "base2": np.array([2, 2]),
+                                                               "solid": np.array([100, 3])}),
+                 file_format="gmsh22", binary=False)
+    one = block_scene(tmp_path, mesh='type = "file", path = "two.msh"', fixed="base", extra=PRESSED.replace(
+        "blk.zmax", "blk.boundary"))
+    code, out = qsc(["check", one], ranks, cwd=tmp_path)
+    assert code == 2 and own_lines(out)[-1].startswith(
+        "qsc: error: load step 1: free rigid-body motion of blk piece 2 of 2 (around 2.5, 0.5, 0.5)"), out
+    both = block_scene(tmp_path, mesh='type = "file", path = "two.msh"', fixed="base", extra=PRESSED.replace(
+        "blk.zmax", "blk.boundary") + '\n[[boundary]]\nsurface = "blk.base2"\ntype = "displacement"\nux = 0.0\n'
+        'uy = 0.0\nuz = 0.0\n')
+    code, out = qsc(["run", both, "--out", "out"], ranks, cwd=tmp_path)
+    assert code == 0, out
+
+
 # ---------------------------------------------------------------- failed solves
 
 def _summary(out_dir):

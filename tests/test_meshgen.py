@@ -6,7 +6,7 @@ import pytest
 
 from qsc_petsc import fem
 from qsc_petsc.errors import MeshError
-from qsc_petsc.meshgen import BOX_SURFACES, boundary_faces, box_mesh, read_mesh_file
+from qsc_petsc.meshgen import BOX_SURFACES, boundary_faces, box_mesh, cell_pieces, read_mesh_file
 
 ORIGIN, SIZE, CELLS = (1.0, -2.0, 0.5), (2.0, 1.0, 3.0), (3, 2, 4)
 OUTWARD = dict(zip(BOX_SURFACES, np.vstack([-np.eye(3), np.eye(3)])[[0, 3, 1, 4, 2, 5]]))
@@ -137,6 +137,35 @@ def test_read_hex_file_unmirrors_cells(tmp_path):
     n, _ = fem.face_normals("quad", xf, fem.CENTROID["quad"][None])
     centre = np.add(ORIGIN, 0.5 * np.asarray(SIZE))
     assert (np.einsum("ki,ki->k", n[:, 0], xf.mean(axis=1) - centre) > 0).all()
+
+
+def test_cells_listed_twice_are_used_once(tmp_path, capsys):
+    """gmsh's msh2 lists an element once per physical volume it belongs to (an inner region tagged inside the
+    whole): the reader kept both copies, whose stiffness counted twice (9.8 % off in displacement, exit 0; helper
+    pass, session 25). Each cell is now used once, and the reader says how many were listed again."""
+    box = box_mesh(ORIGIN, SIZE, (2, 2, 2), "tet")
+    inner = box.cells[:5][:, [1, 0, 2, 3]]                       # the same cells, another node order
+    out = meshio.Mesh(box.points, [("tetra", box.cells), ("tetra", inner)],
+                      cell_data={"gmsh:physical": [np.full(len(box.cells), 1), np.full(5, 2)],
+                                 "gmsh:geometrical": [np.full(len(box.cells), 1), np.full(5, 2)]},
+                      field_data={"all": np.array([1, 3]), "core": np.array([2, 3])})
+    meshio.write(tmp_path / "twice.msh", out, file_format="gmsh22", binary=False)
+    mesh = read_mesh_file(tmp_path / "twice.msh")
+    assert len(mesh.cells) == len(box.cells) and (cell_volumes(mesh) > 0).all()
+    assert "5 of 53 tetra cells are listed more than once" in capsys.readouterr().out
+
+
+def test_cell_pieces_counts_unconnected_parts():
+    """Cells that share a vertex are one piece; pieces are numbered by their first cell."""
+    a = box_mesh(ORIGIN, SIZE, (3, 2, 2), "tet")
+    b = box_mesh(ORIGIN, SIZE, (1, 1, 1), "hex")
+    piece, n = cell_pieces(a.cells, len(a.points))
+    assert n == 1 and not piece.any()
+    two = np.vstack([a.cells[:, [0, 1, 2, 3, 0, 1, 2, 3]] + len(b.points), b.cells])      # b's cells come last
+    piece, n = cell_pieces(two, len(a.points) + len(b.points))
+    assert n == 2 and (piece[:len(a.cells)] == 0).all() and (piece[len(a.cells):] == 1).all()
+    chain = np.array([[0, 1], [2, 3], [1, 2], [5, 6]])            # 0-1-2-3 joined by the third, 5-6 apart
+    assert cell_pieces(chain, 7)[1] == 2 and list(cell_pieces(chain, 7)[0]) == [0, 0, 0, 1]
 
 
 def test_surface_facet_not_on_boundary(tmp_path):

@@ -229,6 +229,78 @@ def test_nodes_that_carry_contact_force_are_touching(tmp_path):
     assert np.any(status == -1.0)          # nodes of the block's top that face nothing and carry nothing
 
 
+SPLIT = """\
+name = "split"
+[[bodies]]
+name = "l1"
+mesh = { type = "box", origin = [0, 0, 0], size = [0.5, 1, 1], cells = [2, 4, 4] }
+material = { youngs_modulus = 1000.0 }
+[[bodies]]
+name = "l2"
+mesh = { type = "box", origin = [0.5, 0, 0], size = [0.5, 1, 1], cells = [3, 4, 4] }
+material = { youngs_modulus = 1000.0 }
+[[bodies]]
+name = "up"
+mesh = { type = "box", origin = [0, 0, 1], size = [1, 1, 0.5], cells = [5, 5, 2] }
+material = { youngs_modulus = 1000.0 }
+[[boundary]]
+surface = "l1.zmin"
+type = "symmetry"
+[[boundary]]
+surface = "l2.zmin"
+type = "symmetry"
+[[boundary]]
+surface = "l1.xmin"
+type = "symmetry"
+[[boundary]]
+surface = "l1.ymin"
+type = "symmetry"
+[[boundary]]
+surface = "l2.ymin"
+type = "symmetry"
+[[boundary]]
+surface = "up.xmin"
+type = "symmetry"
+[[boundary]]
+surface = "up.ymin"
+type = "symmetry"
+[[boundary]]
+surface = "up.zmax"
+type = "pressure"
+value = 10.0
+[[contact]]
+slave = "up.zmin"
+master = "l1.zmax"
+[[contact]]
+slave = "up.zmin"
+master = "l2.zmax"
+[[contact]]
+slave = "l2.xmin"
+master = "l1.xmax"
+[petsc]
+ksp_type = "preonly"
+pc_type = "lu"
+pc_factor_mat_solver_type = "mumps"
+"""
+
+
+def test_a_node_on_several_pairs_keeps_its_traction(tmp_path):
+    """A block on two side-by-side blocks (pairs up.zmin / l1.zmax, up.zmin / l2.zmax, l2.xmin / l1.xmax) under
+    10 Pa: the fields were written pair by pair, so a node on two pairs kept the last one's value (0 on the upper
+    block's bottom over l1, 1e-11 on l1's top edge at x = 0.5; helper pass, session 25). A surface's tractions
+    from several pairs add up, and of different surfaces the largest stands: 10 Pa on every node of up.zmin and
+    of the lower blocks' tops, the uniaxial answer."""
+    path = tmp_path / "split.toml"
+    path.write_text(SPLIT)
+    run, summary = run_scene(path, tmp_path / "out")
+    run.destroy()
+    assert summary["status"] == "ok"
+    result = meshio.read(tmp_path / "out" / "steps" / "step_0001.xdmf")
+    traction, x = result.point_data["contact_traction"][:, 0], result.points
+    tops = np.isclose(x[:, 2], 1.0)                 # up.zmin, l1.zmax and l2.zmax
+    assert tops.sum() > 0 and np.allclose(traction[tops], 10.0, rtol=1e-8)
+
+
 # ---------------------------------------------------------------- rank independence
 
 def test_two_ranks_write_the_same_results(serial, parallel):

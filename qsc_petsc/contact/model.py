@@ -464,8 +464,10 @@ class ContactModel:
         """Point fields (traction, penetration, status on contact nodes) and per pair/die summaries."""
         mesh = self.mesh
         nvl = len(mesh.coords)
-        traction = np.zeros((nvl, 1))
-        penetration = np.zeros((nvl, 1))
+        # a node on several pairs' or dies' surfaces: the tractions of one surface add up (a surface pressed by two
+        # pairs), of different surfaces the largest stands; the largest penetration, the highest status
+        tractions = {}
+        penetration = np.full((nvl, 1), -np.inf)
         status = np.full((nvl, 1), -1.0)
         X = mesh.coords
         summaries = {}
@@ -490,12 +492,12 @@ class ContactModel:
                 p_own = np.einsum("pi,pi->p", F[_owned_rows(mesh, S.nodes)], S.normal) / S.area
                 entry[f"max_slip_{side}"] = self._max_slip(pd, side, S, T, ok & (p_own > 0), found)
                 step_slip = max(step_slip, self._max_slip(pd, side, S, T, ok & (p_own > 0), found, since="report"))
-                traction[S.nodes, 0] = p_own
-                penetration[v, 0] = h
+                tractions.setdefault(S.name, np.zeros(nvl))[S.nodes] += p_own
+                penetration[v, 0] = np.maximum(penetration[v, 0], h)
                 # touching: penetrating, or carrying contact force (rows linearised at an increment's start can
                 # hold a node that the increment's sliding has since lifted off the opposite facets)
                 touching = (h >= -self.scene.solver.active_set_tolerance * pd["h_eff"]) | (p_own[ok] > 0)
-                status[v, 0] = touching.astype(float)
+                status[v, 0] = np.maximum(status[v, 0], touching.astype(float))
                 # a node beyond the opposite surface's edge that its neighbours' rows still press carries force too
                 unfaced = ~ok & (p_own > 0)
                 status[S.nodes[unfaced], 0] = 1.0
@@ -528,9 +530,9 @@ class ContactModel:
             n = np.asarray(spec.normal)
             v = dd["nodes"]
             h = -((X[v] + U[v]) - np.asarray(spec.point) - self.t * np.asarray(spec.motion)) @ n
-            penetration[v, 0] = h
-            status[v, 0] = (h >= -self.scene.solver.active_set_tolerance * dd["h"]).astype(float)
-            traction[v, 0] = (F[_owned_rows(mesh, v)] @ -n) / dd["area"]
+            penetration[v, 0] = np.maximum(penetration[v, 0], h)
+            status[v, 0] = np.maximum(status[v, 0], (h >= -self.scene.solver.active_set_tolerance * dd["h"]))
+            tractions.setdefault(f"die[{dd['index']}]", np.zeros(nvl))[v] += (F[_owned_rows(mesh, v)] @ -n) / dd["area"]
             # a node's area once: a sticking die's tangential rows (gated by its normal row) carry it too
             normal = term.active & (term.gate_of < 0 if term.gate_of is not None else True)
             summaries[f"die[{dd['index']}] {spec.name}"] = {
@@ -540,6 +542,11 @@ class ContactModel:
                 "max_penetration": _finite_or_none(self.comm.allreduce(float(h.max(initial=-np.inf)), op=MPI.MAX)),
                 "contact_area": self.comm.allreduce(float(term.W.getArray()[term.rows][normal].sum()),
                                                     op=MPI.SUM)}
+        traction = np.zeros((nvl, 1))
+        if tractions:
+            stack = np.stack(list(tractions.values()))
+            traction[:, 0] = stack[np.argmax(np.abs(stack), axis=0), np.arange(nvl)]
+        penetration[np.isinf(penetration)] = 0.0            # a node that faces nothing
         fields = {"contact_traction": traction, "contact_penetration": penetration, "contact_status": status}
         return fields, summaries
 
