@@ -52,8 +52,9 @@ def versions():
     from petsc4py import PETSc
 
     from . import __version__
+    mpi = MPI.Get_library_version().splitlines()[0].strip(" \t\r\n\x00")      # Open MPI's ends in a NUL
     return (f"qsc_petsc {__version__}\nPETSc {'.'.join(map(str, PETSc.Sys.getVersion()))}\n"
-            f"petsc4py {petsc4py.__version__}\nMPI {MPI.Get_library_version().splitlines()[0].strip()} "
+            f"petsc4py {petsc4py.__version__}\nMPI {mpi} "
             f"(mpi4py {__import__('mpi4py').__version__})")
 
 
@@ -112,6 +113,9 @@ def main(argv=None):
         say(f"qsc: error: {exc}")
         release(run)
         return EXIT_INPUT
+    except KeyboardInterrupt:
+        say("qsc: interrupted")
+        return 130
     except Exception:  # noqa: BLE001 - a bug: print it and abort, never leave other ranks waiting
         sys.stderr.write(f"[rank {comm.rank}] internal error:\n{traceback.format_exc()}")
         sys.stderr.flush()

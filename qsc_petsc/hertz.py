@@ -43,7 +43,7 @@ SIZES = {"coarse": (0.025, 0.035), "medium": (0.0125, 0.0175), "fine": (0.00625,
 FAR_SIZE = {"sphere": 0.2, "block": 0.5}   # element size far from the contact, in units of R
 GROWTH = 0.35              # the size grows by this much per unit distance beyond the zone (relative to R)
 GENERATOR_VERSION = 1      # bump when the geometry or the meshing changes
-TOL = 1e-5                 # relative tolerance of geometric tests (gmsh pads bounding boxes by 1e-7)
+TOL = 1e-5                 # relative tolerance of geometric tests at R = 1 (gmsh pads bounding boxes by 1e-7)
 
 
 # ---------------------------------------------------------------- analytical solution (pure NumPy)
@@ -267,7 +267,10 @@ def write_mesh(params, path):
         import gmsh
     except ImportError:
         raise MeshError("hertz mesh: the gmsh Python package is needed to generate it (pip install gmsh)") from None
-    R = params["radius"]
+    # the geometry is built and meshed at R = 1, then scaled: OCC pads every bounding box by an absolute 1e-7,
+    # which the face tests (TOL R) did not allow below R = 0.035 m ("no ymin surface found")
+    R = 1.0
+    scale = params["radius"]
     gmsh.initialize(interruptible=False)
     try:
         gmsh.option.setNumber("General.Terminal", 0)
@@ -284,6 +287,8 @@ def write_mesh(params, path):
         gmsh.option.setNumber("Mesh.Algorithm3D", 1)     # Delaunay
         gmsh.option.setNumber("Mesh.Optimize", 1)
         gmsh.model.mesh.generate(3)
+        if scale != 1.0:
+            gmsh.model.mesh.affineTransform([scale, 0, 0, 0, 0, scale, 0, 0, 0, 0, scale, 0])
         gmsh.option.setNumber("Mesh.MshFileVersion", 4.1)
         gmsh.write(str(path))
     except MeshError:

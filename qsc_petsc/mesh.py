@@ -39,6 +39,7 @@ class GlobalMesh:
     surface_names: list         # "body.surface", index = bit
     cell_piece: np.ndarray = None   # (m,) connected piece (index into piece_names)
     piece_names: list = None    # a body's name, or "body piece k of n (around x, y, z)" for a body in pieces
+    body_sources: list = None   # per body: (its first cell, "bodies[i] (name, what it was made from)")
 
 
 @dataclass
@@ -63,6 +64,7 @@ class LocalMesh:
     vertex_range: tuple         # owned global vertex numbers [start, end)
     cell_piece: np.ndarray = None   # (nc,) connected piece (GlobalMesh.piece_names)
     piece_names: list = None
+    body_sources: list = None   # GlobalMesh.body_sources
     partitioner: str = "none"   # what distributed the cells: "coordinate bisection" or PETSc's partitioner type
     _surface_vertices: dict = field(default_factory=dict)
 
@@ -128,6 +130,13 @@ class LocalMesh:
         body = np.full(len(self.coords), -1, dtype=self.cell_body.dtype)
         body[self.cells] = self.cell_body[:, None]
         return body
+
+    def describe_cell(self, orig):
+        """Where a cell (its original id) is, for a message: 'bodies[1] (upper, mesh file m.msh): tet 100 (0-based,
+        in the body's order of cells)'."""
+        starts = [first for first, _ in self.body_sources]
+        b = int(np.searchsorted(starts, orig, side="right")) - 1
+        return f"{self.body_sources[b][1]}: {self.cell_type} {orig - starts[b]} (0-based, in the body's order of cells)"
 
     @cached_property
     def vertex_piece(self):
@@ -235,7 +244,8 @@ def check_size(scene, comm, available=available_memory):
 
 def build_global_mesh(scene):
     """Generate or read every body and merge them into one vertex/cell numbering (rank 0)."""
-    points, cells, bodies, masks, names, pieces, piece_names = [], [], [], [], [], [], []
+    points, cells, bodies, masks, names, pieces, piece_names, sources = [], [], [], [], [], [], [], []
+    n_cells = 0
     offset, cell_types = 0, set()
     for b, body in enumerate(scene.bodies):
         spec = body.mesh
@@ -268,13 +278,18 @@ def build_global_mesh(scene):
             centre = bm.points[np.unique(bm.cells[piece == k])].mean(axis=0)
             piece_names.append(f"{body.name} piece {k + 1} of {n_pieces} (around "
                                f"{', '.join(f'{c:.3g}' for c in centre)})")
+        made = ("generated box" if spec.type == "box" else f"Hertz {spec.part} mesh" if spec.type == "hertz"
+                else f"mesh file {spec.path}")
+        sources.append((n_cells, f"bodies[{b}] ({body.name}, {made})"))
+        n_cells += len(bm.cells)
         points.append(bm.points)
         cells.append(bm.cells + offset)
         bodies.append(np.full(len(bm.cells), b))
         masks.append(mask)
         offset += len(bm.points)
     return GlobalMesh(np.concatenate(points), np.concatenate(cells), cell_types.pop(),
-                      np.concatenate(bodies), np.concatenate(masks), names, np.concatenate(pieces), piece_names)
+                      np.concatenate(bodies), np.concatenate(masks), names, np.concatenate(pieces), piece_names,
+                      sources)
 
 
 def _check_extent(index, spec, points):
@@ -321,9 +336,10 @@ def distribute_mesh(scene, comm):
     """Build, label and distribute the scene's mesh; return this rank's LocalMesh."""
     check_size(scene, comm)
     gm = on_root(comm, lambda: build_global_mesh(scene))
-    header = comm.bcast((gm.cell_type, gm.surface_names, len(gm.points), len(gm.cells), gm.piece_names)
+    header = comm.bcast((gm.cell_type, gm.surface_names, len(gm.points), len(gm.cells), gm.piece_names,
+                         gm.body_sources)
                         if comm.rank == 0 else None, root=0)
-    cell_type, surface_names, n_vertices, n_cells, piece_names = header
+    cell_type, surface_names, n_vertices, n_cells, piece_names, body_sources = header
     check_surface_references(scene, surface_names)
     nn = fem.CELL_NODES[cell_type]
     nf = len(fem.CELL_FACES[cell_type])
@@ -427,7 +443,7 @@ def distribute_mesh(scene, comm):
         coords=dm.getCoordinatesLocal().getArray().reshape(-1, 3).copy(),
         cells=np.ascontiguousarray(local_cells), cell_body=leaf[c0:c1, nn + nf].copy(),
         cell_orig=leaf[c0:c1, nn + nf + 1].copy(), face_mask=leaf[c0:c1, nn:nn + nf].copy(),
-        cell_piece=leaf[c0:c1, nn + nf + 2].copy(), piece_names=piece_names,
+        cell_piece=leaf[c0:c1, nn + nf + 2].copy(), piece_names=piece_names, body_sources=body_sources,
         vert_orig=vert_orig, gvert=gvert, owned=owned, owner=owner,
         n_vertices=n_vertices, n_cells=n_cells, vertex_range=(vstart, vstart + n_owned),
         partitioner=(chosen or "coordinate bisection") if comm.size > 1 else "none")

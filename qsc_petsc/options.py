@@ -10,12 +10,13 @@ _AT_START_UP = set()    # option names in the database when PETSc started: comma
 def split_petsc_args(argv):
     """Separate PETSc options (single dash, e.g. -qsc_pc_type lu) from the CLI's own arguments.
 
-    A token after a PETSc option is its value unless it is itself an option or a scene file."""
+    A token after a PETSc option is its value unless it is itself an option or a scene file. -h is the CLI's help
+    (PETSc's is -help)."""
     own, petsc = [], []
     i = 0
     while i < len(argv):
         tok = argv[i]
-        if tok.startswith("-") and not tok.startswith("--") and not _is_number(tok) and len(tok) > 1:
+        if tok.startswith("-") and not tok.startswith("--") and not _is_number(tok) and len(tok) > 1 and tok != "-h":
             petsc.append(tok)
             nxt = argv[i + 1] if i + 1 < len(argv) else None
             if nxt is not None and (not nxt.startswith("-") or _is_number(nxt)) and not nxt.endswith(".toml"):
@@ -115,8 +116,10 @@ def check_tolerances():
 # PETSc error codes that setFromOptions raises for a bad option: wrong argument, out of range (a value
 # that does not parse), a value that is none of the option's choices, unknown type (a misspelt or
 # missing solver package)
-_OPTION_ERRORS = {62: "a wrong argument", 63: "a value out of range or not a number",
-                  83: "a value that is none of the option's choices", 86: "an unknown type"}
+_OPTION_ERRORS = {56: "a value the option does not support (a viewer option such as -qsc_ksp_monitor takes no "
+                      "value, or ascii:FILE)", 62: "a wrong argument", 63: "a value out of range or not a number",
+                  65: "a file that cannot be opened", 83: "a value that is none of the option's choices",
+                  86: "an unknown type"}
 
 
 def set_from_options(obj, what):
@@ -124,22 +127,31 @@ def set_from_options(obj, what):
     options database is the same everywhere, so every rank fails here together)."""
     from petsc4py import PETSc
 
-    from .errors import SceneError, petsc_detail
+    from .errors import SceneError
     try:
         obj.setFromOptions()
     except PETSc.Error as exc:
         if exc.ierr not in _OPTION_ERRORS:
             raise
-        detail = petsc_detail(exc)
-        raise SceneError(f"PETSc options of the {what}: {_OPTION_ERRORS[exc.ierr]}{_holders(detail)} (PETSc error "
-                         f"{exc.ierr} in {detail})") from None
+        raise SceneError(f"PETSc options of the {what}: {refused_option(exc)}") from None
+
+
+def refused_option(exc):
+    """What a PETSc error raised for a bad option says: the kind, the options it is about, PETSc's detail."""
+    from .errors import petsc_detail
+
+    detail = petsc_detail(exc)
+    return f"{_OPTION_ERRORS[exc.ierr]}{_holders(detail)} (PETSc error {exc.ierr} in {detail})"
 
 
 def _holders(detail):
-    """The options PETSc's message is about, as ' in -name': those whose value it quotes as not a number (it names
-    the value, not the option), or a type option given no value; '' if none is found."""
-    quoted = re.search(r"Input string (\S+) has no numeric value", detail)
-    names = [f"-{name}" for name, value in options_in_effect().items() if quoted and value == quoted.group(1)]
+    """The options PETSc's message is about, as ' in -name': those whose value it quotes (as not a number, an
+    unsupported viewer or a file it cannot open: it names the value, not the option), or a type option given no
+    value; '' if none is found."""
+    quoted = (re.search(r"Input string (\S+) has no numeric value", detail)
+              or re.search(r"Unsupported viewer (\S+)", detail) or re.search(r"file: (\S+)", detail))
+    names = [f"-{name}" for name, value in options_in_effect().items()
+             if quoted and (value == quoted.group(1) or value.endswith(":" + quoted.group(1)))]
     if "Unable to find requested" in detail:        # a type option given no value: PETSc quotes an empty name
         names = [f"-{name} (no value given)" for name, value in options_in_effect().items()
                  if name.startswith(PREFIX) and name.endswith("_type") and not value]

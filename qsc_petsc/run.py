@@ -129,10 +129,27 @@ class Run:
         self.destroyed = False
         try:
             self._build(scene, comm)
-        except BaseException:
+        except BaseException as exc:
+            if isinstance(exc, QscError):
+                self._set_up_failed(exc)
             options.remove_options(self.from_scene)   # a failed set-up leaks no options to the next run
             raise
         _LIVE_RUNS[:] = [ref for ref in _LIVE_RUNS if ref() is not None] + [weakref.ref(self)]
+
+    def _set_up_failed(self, exc):
+        """A set-up that stopped on bad input (a refused PETSc option, a bad mesh) still says so in its folder:
+        summary.json with status "failed" and the error, and petsc_options.txt (an earlier run's results in the
+        folder would otherwise read "ok"). Collective; a folder that cannot take them adds nothing to the error."""
+        summary = {"scene": self.scene.name, "status": "failed", "error": str(exc), "qsc_petsc": __version__,
+                   "ranks": self.comm.size, "petsc_options": options.options_in_effect()}
+        try:
+            path = self.out / "summary.json"
+            write_on_root(self.comm, path, lambda: write_json(path, summary))
+            path = self.out / "petsc_options.txt"
+            write_on_root(self.comm, path, lambda: path.write_text(
+                options.options_text(summary["petsc_options"], self.from_scene)))
+        except QscError:
+            pass
 
     def _build(self, scene, comm):
         """Mesh, contact model and its first search, operators, solver and output writer, in that order."""
@@ -311,8 +328,9 @@ class Run:
                     self.summary["steps"].append(record)
                     self.write_summary()
                 last = stats["solves"][-1]
-                self.log(f"step {step}/{n_steps}: load factor {t:.4g}, {last['snes_iterations']} Newton / "
-                         f"{sum(s['ksp_iterations'] for s in stats['solves'])} Krylov iterations, "
+                # both counts over every try of the step, cut back or not (the summary's snes/ksp_iterations)
+                self.log(f"step {step}/{n_steps}: load factor {t:.4g}, {record['snes_iterations']} Newton / "
+                         f"{record['ksp_iterations']} Krylov iterations, "
                          f"{last['snes_reason']}{_kept_rows(record.get('contact', {}))}")
                 if last.get("tied_in_tension"):
                     self.log(f"step {step}: note: {last['tied_in_tension']} sticking die node(s) held in slight "
@@ -322,6 +340,13 @@ class Run:
             self.summary["status"] = "failed"
             self.summary["error"] = str(exc)
             self._finish()
+            raise
+        except KeyboardInterrupt:
+            # Ctrl-C: serially the folder can still say so (summary.json read "running" for ever); in parallel the
+            # ranks stop wherever the signal found them, and writing would need them all
+            if self.comm.size == 1:
+                self.summary["status"] = "interrupted"
+                self._finish()
             raise
         self.summary["status"] = "ok"
         self._finish()

@@ -421,8 +421,8 @@ class Options(Field):
                                  f"(the program adds them)")
             if not re.fullmatch(r"[A-Za-z0-9_]+", name):
                 raise SceneError(f"{where}: not a PETSc option name")
-            if isinstance(v, bool):
-                out[name] = "true" if v else "false"
+            if isinstance(v, bool):      # true: the flag with no value (a viewer option such as ksp_monitor
+                out[name] = "" if v else "false"     # refuses "true")
             elif isinstance(v, (int, float, str)):
                 out[name] = v if isinstance(v, str) else repr(v)
             else:

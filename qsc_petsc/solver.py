@@ -748,6 +748,10 @@ class System:
                     raise SceneError("the PETSc options ask for a factorization that no installed package "
                                      f"provides (PETSc error 92 in {petsc_detail(exc)}): check "
                                      "-qsc_pc_factor_mat_solver_type and -qsc_band_pc_factor_mat_solver_type") from None
+                if exc.ierr in (56, 65) and "iewer" in petsc_detail(exc) and _all_failed(self.agree_comm):
+                    # a viewer option read at the solve's end (-qsc_ksp_converged_reason true): the options'
+                    # fault, as at set-up (options.set_from_options)
+                    raise SceneError(f"PETSc options: {options.refused_option(exc)}") from None
                 if exc.ierr != PETSC_ERR_NOT_CONVERGED:
                     if not _all_failed(self.agree_comm):
                         raise
@@ -949,8 +953,8 @@ def _merge(stats, more):
 def _solve_enforced(system, step, t, start, augmented_max):
     """One solve at load factor t from `start`, then, with augmented Lagrangian terms, multiplier updates and
     solves until the next update would change every term's multipliers by at most its augmented_tolerance
-    (that update is left unapplied: ConstraintTerm.next_multipliers); returns (ok, u, stats),
-    stats["augmented_iterations"] the updates computed."""
+    (that update is left unapplied: ConstraintTerm.next_multipliers), at most augmented_max updates applied;
+    returns (ok, u, stats), stats["augmented_iterations"] the updates computed (the applied ones and the test)."""
     ok, u_new, stats = _solve_at(system, step, t, start)
     augmented = [term for term in system.terms if term.augmented]
     outer = 0
@@ -959,7 +963,7 @@ def _solve_enforced(system, step, t, start, augmented_max):
         outer += 1
         if all(change <= term.augmented_tolerance for term, _, change in steps):
             break
-        if outer >= augmented_max:
+        if outer > augmented_max:          # augmented_max updates applied, and this one's test not met
             ok = False
             stats["snes_reason"] = "AUGMENTED_LAGRANGIAN_MAX_IT"
             term, _, change = max(steps, key=lambda step: step[2] / step[0].augmented_tolerance)
@@ -1046,7 +1050,8 @@ def solve_load_step(system, step, t_prev, t_target, u, update_terms, max_cutback
                 why = (f"; the multipliers of {name} still changed by {change:.2g} (relative; its "
                        f"augmented_tolerance {tol:g}) after {augmented_max} updates: raise "
                        f"{name}.augmented_max_iterations, or its penalty (the updates converge the faster the "
-                       f"stiffer it is)")
+                       f"stiffer it is)" + ("; a tolerance below 1e-12 may be under the solve's round-off"
+                                            if tol < 1e-12 else ""))
             if stats["snes_reason"] == "SEARCH_NOT_SETTLED":
                 why = (f"; the rows of the large-sliding pairs had not settled after {max_searches} searches "
                        f"(contact[i].max_searches; more load steps slide less per increment)")

@@ -197,6 +197,23 @@ def _not_a_mesh(tmp):
     return [block_scene(tmp, mesh='type = "file", path = "bad.msh"')], ["cannot read mesh file", "bad.msh"]
 
 
+def _degenerate_file_cell(tmp):
+    # a flat tet in a file body: the message named "tet cell N", N counted over every body's cells
+    box = write_gmsh_box(tmp / "cube.msh", {"base": "zmin"})
+    text = (tmp / "cube.msh").read_text()
+    head, elements = text.split("$Elements\n", 1)
+    lines = elements.split("\n")
+    count, first = int(lines[0]), 1
+    tets = [i for i in range(first, first + count) if lines[i].split()[1] == "4"]
+    fields = lines[tets[3]].split()
+    fields[-1] = fields[-2]                                    # tet 3 of the file: two equal nodes
+    lines[tets[3]] = " ".join(fields)
+    (tmp / "cube.msh").write_text(head + "$Elements\n" + "\n".join(lines))
+    assert len(box.cells) > 3
+    return [block_scene(tmp, mesh='type = "file", path = "cube.msh"', fixed="base")], [
+        "bodies[0] (blk, mesh file ", "cube.msh): tet 3 (0-based", "degenerate"]
+
+
 def _unknown_set_path(tmp):
     return [block_scene(tmp), "--set", "solver.max_cutback=2"], ["solver.max_cutback", "unknown key"]
 
@@ -264,7 +281,7 @@ def _result_name_taken(tmp):
 
 
 BAD_INPUT = [_unknown_key, _wrong_type, _negative_modulus, _missing_mesh_file, _unknown_box_surface,
-             _unknown_file_surface, _not_a_mesh, _unknown_set_path, _set_missing_entry, _unavailable_partitioner,
+             _unknown_file_surface, _not_a_mesh, _degenerate_file_cell, _unknown_set_path, _set_missing_entry, _unavailable_partitioner,
              _shell_partitioner, _huge_box, _body_too_small, _pressure_not_finite, _pressure_out_of_range,
              _conflicting_boundaries, _negative_tolerance, _snes_without_newton_test, _result_name_taken]
 SERIAL_OK = {_unavailable_partitioner}     # cases that only fail in parallel
@@ -337,7 +354,15 @@ def test_version():
     assert lines[0] == f"qsc_petsc {qsc_petsc.__version__}"
     assert lines[1] == "PETSc " + ".".join(map(str, PETSc.Sys.getVersion()))
     assert lines[2] == f"petsc4py {petsc4py.__version__}"
-    assert len(lines[3].split()) > 1
+    assert len(lines[3].split()) > 1 and "\x00" not in out        # Open MPI's version string ends in a NUL
+
+
+def test_dash_h_is_the_help():
+    """-h is argparse's help (every usage line shows it), not a PETSc option: `qsc run -h` said the scene was
+    missing, `qsc run SCENE -h` ran the scene (helper pass, session 25)."""
+    for args in (["-h"], ["run", "-h"], ["check", "-h"], ["run", CONFIGS / "patch_test.toml", "-h"]):
+        code, out = qsc(args)
+        assert code == 0 and "usage: qsc" in out and "results in" not in out, out
 
 
 @pytest.mark.parametrize("ranks", RANKS)
@@ -589,6 +614,31 @@ def test_bad_petsc_option_is_an_input_error(tmp_path, option):
         assert "a value out of range or not a number in -qsc_ksp_rtol (PETSc error 63" in proc.stdout, proc.stdout
     if option == ["-qsc_ksp_type"]:     # PETSc names an empty type: qsc names the option
         assert "an unknown type in -qsc_ksp_type (no value given) (PETSc error 86" in proc.stdout, proc.stdout
+    # the folder says so (it held nothing, or an earlier run's "ok" summary: helper pass, session 25)
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["status"] == "failed" and "PETSc options of the solver" in summary["error"]
+    assert f"-{option[0].lstrip('-')}" in (tmp_path / "petsc_options.txt").read_text()
+
+
+@pytest.mark.parametrize("option, holder", [
+    (["-qsc_ksp_monitor", "true"], "a value the option does not support"),
+    (["-qsc_snes_monitor", "ascii:/nonexistent/dir/x.txt"], "a file that cannot be opened"),
+    (["-qsc_ksp_converged_reason", "true"], "a value the option does not support")])
+def test_a_viewer_option_with_a_bad_value_is_an_input_error(tmp_path, option, holder):
+    """Viewer options given a value they do not take, or a file that cannot be opened, ended in a traceback per
+    rank and MPI_Abort (exit 1), or, read at the solve's end, in a failed solve (exit 3; helper pass, session 25):
+    exit 2 with one line naming the option. In a scene, `ksp_monitor = true` is the flag itself."""
+    proc = subprocess.run([sys.executable, "-m", "qsc_petsc.cli", "run", str(CONFIGS / "patch_test.toml"),
+                           "--out", str(tmp_path / "out"), *option], capture_output=True, text=True, timeout=120,
+                          check=False)
+    assert proc.returncode == 2, proc.stdout + proc.stderr
+    last = proc.stdout.splitlines()[-1]
+    assert last.startswith("qsc: error: PETSc options") and f"{holder}" in last and f"in {option[0]} (" in last, last
+    assert "Traceback" not in proc.stderr + proc.stdout
+    proc = subprocess.run([sys.executable, "-m", "qsc_petsc.cli", "run", str(CONFIGS / "patch_test.toml"),
+                           "--out", str(tmp_path / "flag"), "--set", "petsc.ksp_converged_reason=true"],
+                          capture_output=True, text=True, timeout=120, check=False)
+    assert proc.returncode == 0 and "Linear qsc_ solve converged due to" in proc.stdout, proc.stdout + proc.stderr
 
 
 BAND_OPTIONS = {

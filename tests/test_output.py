@@ -301,6 +301,27 @@ def test_a_node_on_several_pairs_keeps_its_traction(tmp_path):
     assert tops.sum() > 0 and np.allclose(traction[tops], 10.0, rtol=1e-8)
 
 
+def test_an_interrupted_run_says_so(tmp_path, monkeypatch):
+    """Ctrl-C during a run left summary.json at "running" for ever and no petsc_options.txt (helper pass, session
+    25): serially the run now writes status "interrupted" with the steps it finished, then stops."""
+    from qsc_petsc import run as run_module
+    calls = []
+    original = run_module.solve_load_step
+
+    def interrupted_at_step_2(*args, **kwargs):
+        calls.append(1)
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(run_module, "solve_load_step", interrupted_at_step_2)
+    with pytest.raises(KeyboardInterrupt):
+        run_scene(CONFIGS / "patch_test.toml", tmp_path / "out", ["load.steps=3"])
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert summary["status"] == "interrupted" and len(summary["steps"]) == 1
+    assert (tmp_path / "out" / "petsc_options.txt").is_file()
+
+
 # ---------------------------------------------------------------- rank independence
 
 def test_two_ranks_write_the_same_results(serial, parallel):

@@ -357,7 +357,7 @@ def test_petsc_tables_are_flattened_over_the_defaults():
     data["petsc"] = {"ksp": {"type": "gmres", "monitor": True, "max_it": 50},
                      "pc_type": "lu", "snes": {"rtol": 1e-8}}
     assert parse(data).petsc == {"ksp_type": "gmres", "pc_type": "lu", "ksp_rtol": "1e-10",
-                                 "ksp_monitor": "true", "ksp_max_it": "50", "snes_rtol": "1e-08"}
+                                 "ksp_monitor": "", "ksp_max_it": "50", "snes_rtol": "1e-08"}
 
 
 def test_petsc_overrides_replace_nested_options():
@@ -435,7 +435,7 @@ def test_to_dict_is_plain_data(tmp_path):
             for v in value:
                 plain(v)
     plain(resolved)
-    assert resolved["petsc"] == {"ksp_type": "preonly", "pc_type": "lu", "ksp_rtol": "1e-10", "snes_monitor": "true"}
+    assert resolved["petsc"] == {"ksp_type": "preonly", "pc_type": "lu", "ksp_rtol": "1e-10", "snes_monitor": ""}
     # the resolved dict is itself valid input and resolves to the same scene
     assert parse(resolved, source_dir="/").to_dict() == resolved
 

@@ -276,7 +276,18 @@ def test_augmented_lagrangian_that_does_not_settle_names_its_keys(tmp_path):
     _, summary = run_scene(CONFIGS / "two_cubes_dies.toml", tmp_path / "more",
                            al + ["contact.0.augmented_max_iterations=100"])
     assert summary["status"] == "ok"
-    assert 25 < summary["steps"][-1]["solves"][-1]["augmented_iterations"] <= 100
+    assert 25 < summary["steps"][-1]["solves"][-1]["augmented_iterations"] <= 101
+
+
+def test_augmented_max_iterations_counts_the_updates_applied(tmp_path):
+    """augmented_max_iterations = N allows N updates and the test of an (N + 1)-th: the loop counted the test
+    too, so N = 1 applied none, and every cutback of the patch test failed (helper pass, session 25). The patch
+    test's flat contact needs one update (measured: two computed, the second the test)."""
+    _, summary = run_scene(CONFIGS / "patch_test.toml", tmp_path / "one",
+                           ['contact.0.enforcement="augmented_lagrangian"', "contact.0.penalty=1e2",
+                            "contact.0.augmented_max_iterations=1"])
+    assert summary["status"] == "ok" and summary["steps"][0]["cutbacks"] == 0
+    assert summary["steps"][0]["solves"][-1]["augmented_iterations"] == 2
 
 
 def test_a_new_term_on_the_same_rows_starts_on_their_multipliers():
