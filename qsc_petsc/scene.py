@@ -528,8 +528,9 @@ CONTACT = Table({
                              "answer's linear extrapolation; 0: every search makes new rows (not with large "
                              "sliding, whose searches settle by it).", ge=0, default=1e-3),
     "max_searches": Int("Large sliding: most searches per increment, its start's included; an increment whose rows "
-                        "have not settled by then is cut in half (the slides measured in session 17 settled in "
-                        "6-10 searches with segment rows, 11-13 with nodal or Gauss rows).", ge=2,
+                        "have not settled by then is cut in half (slides of configs/sliding_cubes.toml measured in "
+                        "session 25 settled in 6-11 searches with segment rows, 7-17 with nodal and 7-20 with Gauss "
+                        "rows).", ge=2,
                         default=20),
 })
 

@@ -54,6 +54,10 @@ def main():
     ap.add_argument("--only", nargs="*", default=None, help="labels of the options to run (default: all)")
     add_docs_args(ap, "Contact integration options on the patch test", petsc=False)
     args = ap.parse_args()
+    unknown = sorted(set(args.only or []) - {label for label, *_ in OPTIONS})
+    if unknown:
+        ap.error(f"--only: unknown label(s) {', '.join(unknown)}; the labels are "
+                 + "; ".join(label for label, *_ in OPTIONS))
     rows = []
     for label, formulation, weight, extra in OPTIONS:
         if args.only and label not in args.only:
@@ -71,10 +75,13 @@ def main():
             print(f"{label} ({lower},{upper}): err {rows[-2]['max_stress_error']:.2e} / "
                   f"{rows[-1]['max_stress_error']:.2e}, swap {swap:.1e}", flush=True)
     docs = ROOT / "docs"
-    with open(docs / "integration_table.csv", "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=COLUMNS)
+    # the table's columns only, written whole or not at all (a failed write left the header alone)
+    tmp = docs / "integration_table.csv.tmp"
+    with open(tmp, "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=COLUMNS, extrasaction="ignore")
         w.writeheader()
         w.writerows(rows)
+    tmp.replace(docs / "integration_table.csv")
     table = []
     for label, *_ in OPTIONS:
         mine = [r for r in rows if r["option"] == label and r["lower"] != r["upper"]]

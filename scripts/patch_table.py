@@ -83,10 +83,13 @@ def main():
                       f"{rows[-2]['max_stress_error']:.2e} / {rows[-1]['max_stress_error']:.2e}, swap {swap:.1e}",
                       flush=True)
     docs = ROOT / "docs"
-    with open(docs / "patch_table.csv", "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=COLUMNS)
+    # the table's columns only, written whole or not at all (a failed write left the header alone)
+    tmp = docs / "patch_table.csv.tmp"
+    with open(tmp, "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=COLUMNS, extrasaction="ignore")
         w.writeheader()
         w.writerows(rows)
+    tmp.replace(docs / "patch_table.csv")
     fmt = lambda x: f"{x:.2e}" if isinstance(x, float) else str(x)
     headers = ["lower", "upper", "formulation", "weight", "slave", "alpha", "max \\|szz+p\\|/p", "rms",
                "max traction err", "max pen slave", "max pen master", "Newton", "swap diff"]

@@ -138,12 +138,14 @@ def stress_error(row):
     import tomllib
 
     import h5py
+
+    from qsc_petsc.output import VOIGT_TO_TENSOR6
     folder = ROOT / row["folder"]
     scene = tomllib.loads((folder / "scene.resolved.toml").read_text())
     p = next(b["value"] for b in scene["boundary"] if b["type"] == "pressure")
     with h5py.File(folder / "solution.h5", "r") as h5:
         last = max(k for k in h5 if k.startswith("step_"))
-        szz = h5[f"{last}/stress"][:, 2]
+        szz = h5[f"{last}/stress"][:, VOIGT_TO_TENSOR6.index(2)]      # the file's order is XDMF's Tensor6
     return float(np.abs(szz + p).max() / p)
 
 
