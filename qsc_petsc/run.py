@@ -306,7 +306,7 @@ class Run:
                         system, step, t_prev, t, u, update, scene.solver.max_cutbacks,
                         augmented_max=augmented_max, log=self.log,
                         before=before, predict=scene.solver.predictor == "extrapolate", settle=settle,
-                        max_searches=max_searches)
+                        max_searches=max_searches, missed=self.contact.missed if scene.die else None)
                 with self.phases("output"):
                     point, cell, ul = self.fields(u)
                     record = self._step_record(step, t, stats, u, ul)

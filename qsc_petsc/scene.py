@@ -792,10 +792,18 @@ def _cross_check(scene: dict, source_dir: Path) -> None:
         if die["name"] in dies:
             raise SceneError(f"die[{i}].name: duplicate die name {_show(die['name'])}")
         dies.add(die["name"])
+        moduli = {}
         for j, ref in enumerate(die["surfaces"]):
-            _check_ref(ref, f"die[{i}].surfaces[{j}]", bodies)
+            body = _check_ref(ref, f"die[{i}].surfaces[{j}]", bodies)
             if ref in die["surfaces"][:j]:
                 raise SceneError(f"die[{i}].surfaces[{j}]: {_show(ref)} is listed twice")
+            moduli[body] = bodies[body]["material"]["youngs_modulus"]
+        if len(set(moduli.values())) > 1:
+            # its penalty alpha E / h takes one E: the smallest left a stiffer body 1e3 x softer held 2.5 % low
+            raise SceneError(f"die[{i}].surfaces: the die presses bodies of different Young's moduli ("
+                             + ", ".join(f"{b} {e:g} Pa" for b, e in moduli.items())
+                             + "); its penalty takes one: give each body a die of its own (same point, normal "
+                               "and motion)")
         norm = math.sqrt(sum(c * c for c in die["normal"]))
         if norm == 0:
             raise SceneError(f"die[{i}].normal: must be non-zero, got {_show(die['normal'])}")

@@ -979,7 +979,7 @@ def _solve_enforced(system, step, t, start, augmented_max):
 
 def solve_load_step(system, step, t_prev, t_target, u, update_terms, max_cutbacks,
                     augmented_max=25, log=None, before=None, predict=True, settle=None,
-                    max_searches=20):
+                    max_searches=20, missed=None):
     """Advance from t_prev to t_target, halving the increment on failure; returns (u, stats, before).
 
     predict: each try starts from the linear extrapolation of the last two converged states along the load
@@ -991,6 +991,8 @@ def solve_load_step(system, step, t_prev, t_target, u, update_terms, max_cutback
     converged u and returns (terms, settled); while not settled the try is solved again from u on those terms,
     and a try whose searches (update_terms' included) reach max_searches unsettled fails (SEARCH_NOT_SETTLED),
     so its increment is halved like any failed one.
+    missed (dies; ContactModel.missed): after a converged try, the nodes that were out of a die's reach at the
+    increment's start and went through it, or None; a try with some fails (OUT_OF_REACH) and is halved.
     A body that the boundary conditions and every contact row within reach leave free is a scene
     error (System.free_motions); a failed solve names what its iterates left free."""
     dt = t_target - t_prev
@@ -1024,6 +1026,11 @@ def solve_load_step(system, step, t_prev, t_target, u, update_terms, max_cutback
             updates = stats["augmented_iterations"] + more["augmented_iterations"]
             _merge(stats, more)
             stats["augmented_iterations"] = updates
+        if ok and missed is not None:
+            through = missed(u_new)
+            if through:
+                ok = False
+                stats["snes_reason"], stats["out_of_reach"] = "OUT_OF_REACH", through
         stats.update(load_factor=t_try, searches=searches)
         records.append(stats)
         if ok:
@@ -1052,6 +1059,9 @@ def solve_load_step(system, step, t_prev, t_target, u, update_terms, max_cutback
                        f"{name}.augmented_max_iterations, or its penalty (the updates converge the faster the "
                        f"stiffer it is)" + ("; a tolerance below 1e-12 may be under the solve's round-off"
                                             if tol < 1e-12 else ""))
+            if stats["snes_reason"] == "OUT_OF_REACH":
+                why = (f"; {stats['out_of_reach']} out of the die's reach at the increment's start went through it "
+                       f"(raise die[i].search_distance, or use more load steps)")
             if stats["snes_reason"] == "SEARCH_NOT_SETTLED":
                 why = (f"; the rows of the large-sliding pairs had not settled after {max_searches} searches "
                        f"(contact[i].max_searches; more load steps slide less per increment)")

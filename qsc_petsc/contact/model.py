@@ -49,9 +49,15 @@ def _owned_rows(mesh, v):
 
 
 def surface_data(mesh, name, template):
-    """Faces and nodal area, size and normal of a surface, assembled over ranks."""
+    """Faces and nodal area, size and normal of a surface, assembled over ranks; name may be a list of surfaces,
+    taken as one (their faces' union: a face in two of them counts once)."""
     comm = mesh.comm
-    c, lf = mesh.surface_faces(name)
+    names = [name] if isinstance(name, str) else list(name)
+    c, lf = (np.concatenate(x) for x in zip(*(mesh.surface_faces(n) for n in names)))
+    if len(names) > 1:
+        _, keep = np.unique(c * 64 + lf, return_index=True)
+        c, lf = c[keep], lf[keep]
+        name = " + ".join(names)
     faces = mesh.face_nodes(c, lf)
     body = int(mesh.cell_body[c[0]]) if len(c) else -1
     body = comm.allreduce(body, op=MPI.MAX)
@@ -71,7 +77,7 @@ def surface_data(mesh, name, template):
     acc_n.setValues(ndofs, (nodal[:, :, None] * normal[:, 0, None, :]).ravel(), addv=PETSc.InsertMode.ADD_VALUES)
     acc.assemble()
     acc_n.assemble()
-    nodes = mesh.surface_vertices(name)
+    nodes = np.unique(np.concatenate([mesh.surface_vertices(n) for n in names]))
     nodes = nodes[mesh.owned[nodes]]
     pos = _owned_rows(mesh, nodes)
     a = acc.getArray().reshape(-1, 3)[pos]
@@ -191,14 +197,14 @@ def die_data(mesh, scene, template):
     dies = []
     for i, die in enumerate(scene.die):
         surfaces = [surface_data(mesh, s, template) for s in die.surfaces]
-        nodes = np.concatenate([s.nodes for s in surfaces])
-        area = np.concatenate([s.area for s in surfaces])
-        nodes, first = np.unique(nodes, return_index=True)
+        # the die's surfaces as one: a node on two of them (a face split into groups) has its whole area, not
+        # the first-listed one's (the seam read twice the pressure)
+        whole = surfaces[0] if len(surfaces) == 1 else surface_data(mesh, die.surfaces, template)
         h = min(s.mean_size for s in surfaces)
-        E = min(scene.bodies[s.body].material.youngs_modulus for s in surfaces)
-        dies.append({"index": i, "spec": die, "nodes": nodes, "area": area[first], "h": h,
+        E = min(scene.bodies[s.body].material.youngs_modulus for s in surfaces)   # one E: scene.py checks it
+        dies.append({"index": i, "spec": die, "nodes": whole.nodes, "area": whole.area, "h": h,
                      "eps_n": die.penalty * E / h, "radius": die.search_distance * h,
-                     "total_area": sum(s.total_area for s in surfaces)})
+                     "total_area": whole.total_area, "surfaces": [(s.name, s.nodes) for s in surfaces]})
     return dies
 
 
@@ -300,11 +306,27 @@ class ContactModel:
                 v = dd["nodes"]
                 gap = (X[v] + U[v] - np.asarray(spec.point) - u_die) @ n
                 near = gap <= dd["radius"]
+                dd["near"] = near                   # the nodes with rows (missed)
                 rows = row_builders.die_rows(mesh.gvert[v[near]], dd["area"][near], X[v[near]], spec.point, n,
                                              u_die, spec.condition == "sticking")
                 out.append(self._term(f"die[{dd['index']}]", rows, dd["eps_n"], dd["h"], False, node_local=True))
         self.current = out
         return out
+
+    def missed(self, u):
+        """After a converged solve: the first die with nodes that had no row (out of its reach at the increment's
+        search) and penetrate it at u, as "die[i] (name): n node(s)", or None (collective). A node farther than
+        the search distance from a die at an increment's start went through it unheld (exit 0, no force)."""
+        U, X = self.mesh.local_vectors(u), self.mesh.coords
+        for dd in self.dies:
+            spec, v = dd["spec"], dd["nodes"]
+            n = np.asarray(spec.normal, dtype=float)
+            depth = -((X[v] + U[v]) - np.asarray(spec.point) - self.t * np.asarray(spec.motion, dtype=float)) @ n
+            count = self.comm.allreduce(int((~dd.get("near", np.ones(len(v), bool)) & (depth > 0)).sum()),
+                                        op=MPI.SUM)
+            if count:
+                return f"die[{dd['index']}] ({spec.name}): {count} node(s)"
+        return None
 
     def prepare(self, t):
         """The first increment's search of every pair (at u = 0, load factor t), made before K is assembled so
@@ -532,7 +554,10 @@ class ContactModel:
             h = -((X[v] + U[v]) - np.asarray(spec.point) - self.t * np.asarray(spec.motion)) @ n
             penetration[v, 0] = np.maximum(penetration[v, 0], h)
             status[v, 0] = np.maximum(status[v, 0], (h >= -self.scene.solver.active_set_tolerance * dd["h"]))
-            tractions.setdefault(f"die[{dd['index']}]", np.zeros(nvl))[v] += (F[_owned_rows(mesh, v)] @ -n) / dd["area"]
+            pressure = np.zeros(nvl)
+            pressure[v] = (F[_owned_rows(mesh, v)] @ -n) / dd["area"]
+            for name, nodes in dd["surfaces"]:       # a die adds to the pressure of the surfaces it presses
+                tractions.setdefault(name, np.zeros(nvl))[nodes] += pressure[nodes]
             # a node's area once: a sticking die's tangential rows (gated by its normal row) carry it too
             normal = term.active & (term.gate_of < 0 if term.gate_of is not None else True)
             summaries[f"die[{dd['index']}] {spec.name}"] = {

@@ -1,0 +1,179 @@
+"""Rigid dies: nodes out of reach that go through, a die over bodies of different moduli, a die's surfaces taken
+as one, and the pressure field where a die and a pair press one surface (a helper's test pass, session 25)."""
+
+import meshio
+import numpy as np
+import pytest
+from conftest import run_scene
+
+from qsc_petsc import fem
+from qsc_petsc.meshgen import box_mesh
+from qsc_petsc.scene import SceneError, load_scene
+
+THROUGH = """\
+name = "through"
+[[bodies]]
+name = "b"
+mesh = { type = "box", origin = [0.0, 0.0, 0.0], size = [1.0, 1.0, 1.0], cells = [4, 4, 4] }
+material = { youngs_modulus = 1000.0, poissons_ratio = 0.3 }
+[[boundary]]
+surface = "b.zmax"
+type = "displacement"
+ux = 0.0
+uy = 0.0
+uz = -0.5
+[[die]]
+name = "floor"
+point = [0.0, 0.0, -0.3]
+normal = [0.0, 0.0, 1.0]
+surfaces = ["b.zmin"]
+[load]
+steps = 1
+[petsc]
+ksp_type = "preonly"
+pc_type = "lu"
+pc_factor_mat_solver_type = "mumps"
+"""
+
+STOP = """\
+name = "stop"
+[[bodies]]
+name = "lower"
+mesh = { type = "box", origin = [0.0, 0.0, 0.0], size = [1.0, 1.0, 1.0], cells = [4, 4, 4] }
+material = { youngs_modulus = 500.0, poissons_ratio = 0.3 }
+[[bodies]]
+name = "upper"
+mesh = { type = "box", origin = [0.0, 0.0, 1.0], size = [1.0, 1.0, 0.5], cells = [5, 5, 2] }
+material = { youngs_modulus = 1000.0, poissons_ratio = 0.3 }
+[[boundary]]
+surface = "lower.xmin"
+type = "symmetry"
+[[boundary]]
+surface = "lower.ymin"
+type = "symmetry"
+[[boundary]]
+surface = "upper.xmin"
+type = "symmetry"
+[[boundary]]
+surface = "upper.ymin"
+type = "symmetry"
+[[boundary]]
+surface = "upper.zmax"
+type = "pressure"
+value = 10.0
+[[contact]]
+slave = "upper.zmin"
+master = "lower.zmax"
+formulation = "quasi_symmetric"
+penalty = 1e4
+[[die]]
+name = "floor"
+point = [0.0, 0.0, 0.0]
+normal = [0.0, 0.0, 1.0]
+surfaces = ["lower.zmin"]
+condition = "frictionless"
+[[die]]
+name = "stop"
+point = [0.0, 0.0, 0.995]
+normal = [0.0, 0.0, 1.0]
+surfaces = ["upper.zmin"]
+condition = "frictionless"
+[load]
+steps = 2
+[petsc]
+ksp_type = "preonly"
+pc_type = "lu"
+pc_factor_mat_solver_type = "mumps"
+"""
+
+
+def _write(tmp_path, name, text):
+    path = tmp_path / f"{name}.toml"
+    path.write_text(text)
+    return path
+
+
+def test_a_body_cannot_pass_through_a_die_from_out_of_reach(tmp_path):
+    """A block 0.3 m above a floor die (search distance 0.25 m) pushed down 0.5 m in one step: the die's rows
+    were made at the step's start for the nodes within reach, none, and the block went through with no force,
+    exit 0. A converged try that leaves out-of-reach nodes through a die fails (OUT_OF_REACH) and is halved:
+    the die carries the block's 208 N (the answer of 2 load steps, or of a larger search distance)."""
+    _, summary = run_scene(_write(tmp_path, "through", THROUGH), tmp_path / "one")
+    step = summary["steps"][0]
+    assert summary["status"] == "ok" and step["cutbacks"] >= 1
+    assert step["solves"][0]["snes_reason"] == "OUT_OF_REACH"
+    force = next(iter(step["contact"].values()))["force_on_bodies"][2]
+    _, ref = run_scene(_write(tmp_path, "through", THROUGH), tmp_path / "two", ["load.steps=2"])
+    assert force == pytest.approx(next(iter(ref["steps"][-1]["contact"].values()))["force_on_bodies"][2], rel=1e-8)
+    assert force == pytest.approx(208.365, rel=1e-4)
+
+
+def test_a_die_over_bodies_of_different_moduli_is_refused(tmp_path):
+    """The die's penalty alpha E / h took the smallest E for every body it pressed: a body 1e3 x stiffer was held
+    2.5 % low, 1e5 x 72 % low. A die over bodies of different Young's moduli is now an input error."""
+    text = STOP.replace('surfaces = ["lower.zmin"]', 'surfaces = ["lower.zmin", "upper.zmax"]')
+    with pytest.raises(SceneError, match=r"die\[0\]\.surfaces: the die presses bodies of different Young's "
+                                         r"moduli \(lower 500 Pa, upper 1000 Pa\)"):
+        load_scene(_write(tmp_path, "two_e", text))
+
+
+def test_a_die_takes_its_surfaces_as_one(tmp_path):
+    """A floor face split into two groups (bot_a, bot_b) in a mesh file: the seam nodes had the first-listed
+    group's area only and read twice the pressure (20 Pa under 10), the die's area 0.93. The die's surfaces are
+    now one surface: the same answer as the unsplit face."""
+    box = box_mesh((0.0, 0.0, 0.0), (1.0, 1.0, 1.0), (4, 4, 4), "tet")
+    blocks, tags, field = [("tetra", box.cells)], [np.full(len(box.cells), 100)], {"solid": np.array([100, 3])}
+    bottom = fem.cell_faces("tet", box.cells[box.surfaces["zmin"][:, 0]], box.surfaces["zmin"][:, 1])
+    left = box.points[bottom].mean(axis=1)[:, 0] < 0.5
+    groups = {"bot_a": bottom[left], "bot_b": bottom[~left], "bottom": bottom}
+    for side in ("xmin", "ymin", "zmax"):
+        rows = box.surfaces[side]
+        groups[side] = fem.cell_faces("tet", box.cells[rows[:, 0]], rows[:, 1])
+    for tag, (name, faces) in enumerate(groups.items(), start=1):
+        blocks.append(("triangle", faces))
+        tags.append(np.full(len(faces), tag))
+        field[name] = np.array([tag, 2])
+    meshio.write(tmp_path / "split.msh", meshio.Mesh(box.points, blocks, cell_data={
+        "gmsh:physical": tags, "gmsh:geometrical": tags}, field_data=field), file_format="gmsh22", binary=False)
+    text = """name = "split"
+[[bodies]]
+name = "b"
+mesh = { type = "file", path = "split.msh" }
+material = { youngs_modulus = 1000.0, poissons_ratio = 0.3 }
+[[boundary]]
+surface = "b.xmin"
+type = "symmetry"
+[[boundary]]
+surface = "b.ymin"
+type = "symmetry"
+[[boundary]]
+surface = "b.zmax"
+type = "pressure"
+value = 10.0
+[[die]]
+name = "floor"
+point = [0.0, 0.0, 0.0]
+normal = [0.0, 0.0, 1.0]
+surfaces = ["b.bot_a", "b.bot_b"]
+[load]
+steps = 1
+[petsc]
+ksp_type = "preonly"
+pc_type = "lu"
+"""
+    _, summary = run_scene(_write(tmp_path, "split", text), tmp_path / "out")
+    die = next(iter(summary["steps"][0]["contact"].values()))
+    assert die["contact_area"] == pytest.approx(1.0, rel=1e-12)
+    traction = meshio.read(tmp_path / "out" / "steps" / "step_0001.xdmf").point_data["contact_traction"][:, 0]
+    assert np.allclose(traction[traction > 0], 10.0, rtol=1e-8)
+
+
+def test_a_die_and_a_pair_on_one_surface_add_up(tmp_path):
+    """A stop die and a contact pair share the upper block's bottom (the die 5 mm below the lower block's top):
+    the field showed the larger of the two (7.5 Pa) where their sum, 10 Pa, is the pressure."""
+    _, summary = run_scene(_write(tmp_path, "stop", STOP), tmp_path / "out")
+    assert summary["status"] == "ok"
+    result = meshio.read(tmp_path / "out" / "steps" / "step_0002.xdmf")
+    traction, x = result.point_data["contact_traction"][:, 0], result.points
+    bottom = np.isclose(x[:, 2], 1.0) & (traction > 0)
+    assert bottom.sum() > 0 and traction.max() == pytest.approx(10.0, rel=1e-6)
