@@ -492,6 +492,65 @@ def test_finite_sliding_says_when_a_step_slides_out_of_its_range(tmp_path):
     assert all(next(iter(step["contact"].values()))["pressed_unfaced_share"] < 0.1 for step in summary["steps"])
 
 
+RIDGE = """\
+name = "ridge"
+[[bodies]]
+name = "lower"
+mesh = { type = "box", origin = [-0.5, -0.5, -0.5], size = [1.0, 1.0, 1.0], cells = [4, 4, 4], rotation = [45.0, 0.0, 0.0] }
+material = { youngs_modulus = 1000.0, poissons_ratio = 0.3 }
+[[bodies]]
+name = "upper"
+mesh = { type = "box", origin = [-0.5, -0.5, 0.8071], size = [1.0, 1.0, 0.5], cells = [4, 4, 2] }
+material = { youngs_modulus = 1000.0, poissons_ratio = 0.3 }
+[[contact]]
+slave = "upper.zmin"
+master = "lower.zmax"
+formulation = "master_slave"
+penalty = 1e4
+sliding = "small"
+integration = "nodal"
+[[contact]]
+slave = "upper.zmin"
+master = "lower.ymax"
+formulation = "master_slave"
+penalty = 1e4
+sliding = "small"
+integration = "nodal"
+[[boundary]]
+surface = "lower.ymin"
+type = "displacement"
+ux = 0.0
+uy = 0.0
+uz = 0.0
+[[boundary]]
+surface = "upper.zmax"
+type = "displacement"
+ux = 0.0
+uy = 0.0
+uz = -0.15
+[load]
+steps = 2
+[petsc]
+ksp_type = "preonly"
+pc_type = "lu"
+pc_factor_mat_solver_type = "mumps"
+"""
+
+
+def test_a_convex_ridge_keeps_its_rows_at_a_gap(tmp_path):
+    """A cube turned 45 degrees about x presses its ridge (the edge of the pairs' two master faces) 0.05 m into a
+    block that starts 0.1 m above it; small sliding, nodal rows (a helper's pass, session 25). The block's nodes
+    over the ridge are past each face's edge by as much as they are above its plane: the first edge band took
+    them as slid off the face and gave them no rows, and the ridge went through the block with no force.
+    Points past an edge by no more than they are off the plane keep their rows: the forces of before the band."""
+    scene = tmp_path / "ridge.toml"
+    scene.write_text(RIDGE)
+    _, summary = run_scene(scene, tmp_path / "out")
+    pairs = list(summary["steps"][-1]["contact"].values())
+    assert summary["status"] == "ok" and all(pair["active_rows"] == 5 for pair in pairs)
+    assert [pair["total_normal_force"] for pair in pairs] == pytest.approx([4.883, 6.377], rel=1e-3)
+
+
 def test_newton_steps_are_damped_where_the_active_sets_wander(tmp_path, monkeypatch):
     """two_pass on configs/sliding_cubes.toml dragged 0.4 m (large sliding): in the second increment the
     semi-smooth iterations wander among active sets that never quite repeat, with residuals of 1e2-1e3 (no

@@ -110,9 +110,12 @@ def closest_faces(points, face_xyz, face_type, face_key, radius, band=None):
     band (p,) [m] or None: the edge band. A point whose closest point is on its
     face's edge with the point beyond it (not inside: it has slid past the
     surface's edge, or sits over a convex kink) lies off the face's normal by
-    the in-plane distance d = |(point - closest) minus its normal part|; its
-    edge_factor is 1 up to d = EDGE_FULL band, falls linearly to 0 at d = band,
-    and a point with d >= band meets no face.
+    the in-plane distance d_p = |(point - closest) minus its normal part|, and
+    off the face's plane by d_n = |(point - closest) . normal|; with
+    d = max(d_p - d_n, 0) (beside the face more than above it) its edge_factor
+    is 1 up to d = EDGE_FULL band, falls linearly to 0 at d = band, and a point
+    with d >= band meets no face. A point over a convex ridge of two faces
+    (d_p = d_n at a right angle) keeps its row at any gap.
     A row of such a point would hold it against the face's plane extended past
     the edge, whose tilt times d moved its gap between searches by far more than
     the penetrations (formulation.md section 6; large sliding did not settle).
@@ -166,9 +169,14 @@ def closest_faces(points, face_xyz, face_type, face_key, radius, band=None):
     if band is not None and len(off):
         r = points[off] - out["closest"][off]
         n = out["normal"][off]
-        r_plane = r - _dot(r, n)[:, None] * n
+        along = _dot(r, n)
+        r_plane = r - along[:, None] * n
+        # past the edge by more than it is off the face's plane: a point over a convex ridge of two faces (a
+        # right angle: as much off the plane as past the edge) keeps its row, one that slid off beside the face
+        # does not
+        beside = np.maximum(np.sqrt(_dot(r_plane, r_plane)) - np.abs(along), 0.0)
         b = np.broadcast_to(band, (p,))[off]
-        factor = (b - np.sqrt(_dot(r_plane, r_plane))) / ((1.0 - EDGE_FULL) * b)
+        factor = (b - beside) / ((1.0 - EDGE_FULL) * b)
         out["edge_factor"][off] = np.clip(factor, 0.0, 1.0)
         out["face"][off[factor <= 0.0]] = -1
     return out
