@@ -411,11 +411,17 @@ def _interactions(record):
     for key, entry in record.get("contact", {}).items():
         tag = key.split(" ", 1)[0]
         if tag.startswith("contact["):
-            pen = max(entry.get("max_penetration_slave", -np.inf), entry.get("max_penetration_master", -np.inf))
+            pen = _largest(entry.get("max_penetration_slave"), entry.get("max_penetration_master"))
             out[tag] = (entry["force_on_slave"], pen)
         else:
-            out[tag] = (entry["force_on_bodies"], entry["max_penetration"])
+            out[tag] = (entry["force_on_bodies"], entry.get("max_penetration"))
     return out
+
+
+def _largest(*values):
+    """The largest of the values that are there (None: no node faced the other surface), or None."""
+    there = [v for v in values if v is not None]
+    return max(there) if there else None
 
 
 def contact_errors(run, reference):
@@ -424,7 +430,7 @@ def contact_errors(run, reference):
     out = {}
     for tag in sorted(set(mine) & set(theirs)):
         (f, p), (f_ref, p_ref) = mine[tag], theirs[tag]
-        out[tag] = {"force": _rel(f, f_ref), "max_penetration": _rel(p, p_ref),
+        out[tag] = {"force": _rel(f, f_ref), "max_penetration": None if p is None or p_ref is None else _rel(p, p_ref),
                     "force_value": list(f), "force_reference": list(f_ref),
                     "max_penetration_value": p, "max_penetration_reference": p_ref}
     return out
@@ -447,7 +453,6 @@ def errors(run, reference):
     out["traction"] = traction_error(run, reference, loc)
     out["contact"] = contact_errors(run, reference)
     for key in ("force", "max_penetration"):
-        vals = [v[key] for v in out["contact"].values()]
-        out[key] = max(vals) if vals else None
+        out[key] = _largest(*(v[key] for v in out["contact"].values()))
     out["step"], out["reference_step"] = run.step, reference.step
     return out

@@ -177,3 +177,22 @@ def test_real_runs_of_the_patch_test(tmp_path):
     # the patch test's exact solution is uniaxial: both runs are close to it, hence to each other
     assert 0 < e["displacement_l2"] < 1e-2 and 0 < e["energy"] < 0.1
     assert e["force"] < 1e-6 and e["traction"] is not None
+
+
+def test_a_pair_that_faces_nothing_has_no_penetration_error():
+    """A pair or die whose nodes face nothing has max penetrations null in summary.json (no longer -Infinity,
+    session 25): the comparison takes them as absent instead of failing on them."""
+    record = {"contact": {"contact[0] a.s / b.s": {"force_on_slave": [0.0, 0.0, 0.0], "max_penetration_slave": None,
+                                                   "max_penetration_master": 1e-3},
+                          "contact[1] c.s / d.s": {"force_on_slave": [0.0, 0.0, 0.0], "max_penetration_slave": None,
+                                                   "max_penetration_master": None},
+                          "die[0] floor": {"force_on_bodies": [0.0, 0.0, 2.0], "max_penetration": None}}}
+
+    class Step:
+        def step_record(self):
+            return record
+
+    out = compare.contact_errors(Step(), Step())
+    assert out["contact[0]"]["max_penetration"] == 0.0 and out["contact[0]"]["max_penetration_value"] == 1e-3
+    assert out["contact[1]"]["max_penetration"] is None and out["die[0]"]["max_penetration"] is None
+    assert out["die[0]"]["force"] == 0.0
