@@ -9,6 +9,14 @@ from .mesh import distribute_mesh
 
 def check(scene, comm):
     """Collective; returns the report text (meaningful on rank 0)."""
+    from . import options
+    from .solver import check_solver_options
+    inserted = options.insert_options(scene.petsc)      # as the run would: the scene's, then the command line's
+    try:
+        options.check_tolerances()
+        check_solver_options(comm)
+    finally:
+        options.remove_options(inserted)
     mesh = distribute_mesh(scene, comm)
     cells = comm.gather(len(mesh.cells), root=0)
     owned = comm.gather(int(mesh.owned.sum()), root=0)

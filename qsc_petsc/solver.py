@@ -197,6 +197,54 @@ class ConstraintTerm:
         return new, (np.sqrt(change / size) if size > 0 else 0.0)
 
 
+def new_snes(comm, max_it):
+    """The run's SNES with qsc's defaults, before the options database has its say (configure_snes)."""
+    snes = PETSc.SNES().create(comm=comm)
+    snes.setOptionsPrefix("qsc_")
+    snes.setType("newtonls")
+    options.insert_options({
+        "snes_linesearch_type": "basic",          # full semi-smooth Newton steps
+        # CG stops on the true residual, so one exact linear solve meets the SNES tolerance
+        # (the preconditioned norm left a second Newton step on every linear increment)
+        "ksp_norm_type": "unpreconditioned",
+    })
+    # no absolute floor: the forces scale with the lengths and moduli (a patch test 1e-25 m wide carries 1e-50 N,
+    # and an atol of 1e-50 N ended its solve "converged" at u = 0); only an exactly zero residual converges at once
+    snes.setTolerances(rtol=1e-10, atol=0.0, stol=1e-10, max_it=max_it)
+    ksp = snes.getKSP()
+    ksp.setType("cg")
+    ksp.getPC().setType("gamg")
+    # PETSc's 10000 let a stagnating solve run for many minutes before it said so; the most measured
+    # here is ~400 per linear solve (plain CG + GAMG, contact at alpha 1e4, docs/performance.md)
+    ksp.setTolerances(rtol=1e-10, max_it=KSP_MAX_IT)
+    return snes
+
+
+def configure_snes(snes):
+    """The options database's say on the run's SNES, its KSP and PC: a refused option or a SNES type whose
+    stops qsc cannot check is a SceneError (also `qsc check`'s, through check_solver_options)."""
+    # a named BoomerAMG gets the tuned defaults too (two cubes merged, 212k dofs, CG: 11.3 s against 33 s
+    # with hypre's own and 17-22 s with GAMG, docs/performance.md)
+    named_hypre = options.option_value("pc_type") == "hypre"
+    added = options.insert_options(preconditioner.HYPRE_DEFAULTS) if named_hypre else {}
+    try:
+        options.set_from_options(snes, "solver (-qsc_snes_*, -qsc_ksp_*, -qsc_pc_*)")
+    finally:
+        options.remove_options(added)
+    if snes.getType() not in NEWTON_TYPES:
+        raise SceneError(f"-qsc_snes_type {snes.getType()}: not a Newton method this solver can check "
+                         f"(the active set and the force residual); use one of {', '.join(NEWTON_TYPES)}")
+
+
+def check_solver_options(comm):
+    """What the run's solver set-up would say of the options database (collective): `qsc check`."""
+    snes = new_snes(comm, 50)
+    try:
+        configure_snes(snes)
+    finally:
+        snes.destroy()
+
+
 class System:
     """K0 u - t b + sum_terms G^T m with Dirichlet rows u_i - t ubar_i, solved by SNES.
 
@@ -287,40 +335,13 @@ class System:
         # search) the last converged solve ended closed; the next increment starts with them closed
         self.closed_rows = {}
 
-        self.snes = PETSc.SNES().create(comm=comm)
-        self.snes.setOptionsPrefix("qsc_")
-        self.snes.setType("newtonls")
-        options.insert_options({
-            "snes_linesearch_type": "basic",          # full semi-smooth Newton steps
-            # CG stops on the true residual, so one exact linear solve meets the SNES tolerance
-            # (the preconditioned norm left a second Newton step on every linear increment)
-            "ksp_norm_type": "unpreconditioned",
-        })
-        # no absolute floor: the forces scale with the lengths and moduli (a patch test 1e-25 m wide carries 1e-50 N,
-        # and an atol of 1e-50 N ended its solve "converged" at u = 0); only an exactly zero residual converges at once
-        self.snes.setTolerances(rtol=1e-10, atol=0.0, stol=1e-10, max_it=max_it)
-        ksp = self.snes.getKSP()
-        ksp.setType("cg")
-        ksp.getPC().setType("gamg")
-        # PETSc's 10000 let a stagnating solve run for many minutes before it said so; the most measured
-        # here is ~400 per linear solve (plain CG + GAMG, contact at alpha 1e4, docs/performance.md)
-        ksp.setTolerances(rtol=1e-10, max_it=KSP_MAX_IT)
+        self.snes = new_snes(comm, max_it)
         self.r = self.u.duplicate()
         self.snes.setFunction(self._residual, self.r)
         self.snes.setJacobian(self._jacobian, self.J, self.J)
         self.snes.setConvergenceTest(self._converged)
         self.snes.setLineSearchPreCheck(self._damp)
-        # a named BoomerAMG gets the tuned defaults too (two cubes merged, 212k dofs, CG: 11.3 s against 33 s
-        # with hypre's own and 17-22 s with GAMG, docs/performance.md)
-        named_hypre = options.option_value("pc_type") == "hypre"
-        added = options.insert_options(preconditioner.HYPRE_DEFAULTS) if named_hypre else {}
-        try:
-            options.set_from_options(self.snes, "solver (-qsc_snes_*, -qsc_ksp_*, -qsc_pc_*)")
-        finally:
-            options.remove_options(added)
-        if self.snes.getType() not in NEWTON_TYPES:
-            raise SceneError(f"-qsc_snes_type {self.snes.getType()}: not a Newton method this solver can check "
-                             f"(the active set and the force residual); use one of {', '.join(NEWTON_TYPES)}")
+        configure_snes(self.snes)
         self.test_reason = 0           # what _converged last answered: a solve converges by it alone
         self.mumps_cap = self._mumps_memory_cap(available_memory)
 

@@ -433,6 +433,18 @@ def test_a_body_in_unconnected_pieces_must_hold_each(tmp_path, ranks):
     assert code == 0, out
 
 
+def test_check_tries_the_solver_options(tmp_path):
+    """qsc check said valid for PETSc options the run refuses at set-up (an unknown PC type, a SNES type whose
+    stops qsc cannot check, from the command line or the scene; helper pass, session 25): it sets up the run's
+    solver from the options and ends as the run would (exit 2, the same line)."""
+    for args in (["-qsc_pc_type", "bogus"], ["--set", "petsc.snes_type=ksponly"]):
+        code, out = qsc(["check", CONFIGS / "patch_test.toml", *args])
+        assert code == 2 and own_lines(out)[-1].startswith("qsc: error: ") and (
+            "bogus" in out or "-qsc_snes_type ksponly" in out), out
+    code, out = qsc(["check", CONFIGS / "patch_test.toml", "-qsc_pc_type", "lu"])
+    assert code == 0, out
+
+
 # ---------------------------------------------------------------- failed solves
 
 def _summary(out_dir):
