@@ -2,6 +2,7 @@
 
 import argparse
 import os
+import signal
 import sys
 import traceback
 
@@ -71,11 +72,17 @@ def release(run):
     gc.collect()
 
 
+def _interrupt(signum, frame):
+    raise KeyboardInterrupt
+
+
 def main(argv=None):
     argv = sys.argv[1:] if argv is None else argv
     if argv[:1] == ["sweep"]:          # runs are subprocesses: the sweep itself never starts PETSc or MPI
         from .sweep import main as sweep_main
         return sweep_main(argv[1:])
+    # SIGTERM (mpirun ending its ranks on Ctrl-C, a batch system's kill) stops a run as Ctrl-C does
+    signal.signal(signal.SIGTERM, _interrupt)
     own, petsc_args = split_petsc_args(argv)
     args = build_parser().parse_args(own)
     init_petsc(petsc_args)

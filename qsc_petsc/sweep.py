@@ -25,7 +25,7 @@ from pathlib import Path
 
 from .errors import QscError, SceneError
 
-EXIT_OK, EXIT_INPUT, EXIT_REFERENCE = 0, 2, 3
+EXIT_OK, EXIT_INPUT, EXIT_REFERENCE, EXIT_INTERRUPTED = 0, 2, 3, 130
 PHASES = ("mesh", "assembly", "search", "rows", "solve", "output")     # run.py's phases, in run order
 PETSC_KEY = re.compile(r"-[A-Za-z][A-Za-z0-9_]*")
 ERROR_COLUMNS = ("displacement_l2", "energy", "force", "max_penetration", "traction")
@@ -278,6 +278,20 @@ def _last_error_line(stdout, stderr):
     return ""
 
 
+def _stop(proc, grace=10.0):
+    """Ctrl-C to a run's process group (mpirun ends its ranks on it), then SIGTERM and SIGKILL, each after `grace`
+    seconds; waits for it."""
+    for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGKILL):
+        try:
+            os.killpg(proc.pid, sig)
+            proc.communicate(timeout=grace)
+            return
+        except subprocess.TimeoutExpired:
+            continue
+        except ProcessLookupError:
+            return
+
+
 def execute(plan, combo, folder):
     """Run one combination into `folder` (made afresh); return its record (status, timings, iterations)."""
     if folder.exists():
@@ -296,6 +310,11 @@ def execute(plan, combo, folder):
         os.killpg(proc.pid, signal.SIGKILL)
         stdout, stderr = proc.communicate()
         rc = None
+    except KeyboardInterrupt:
+        # the run has a session of its own (a timeout kills its whole group): pass Ctrl-C on, so that it stops
+        # (and says "interrupted" where it can) instead of running on without the sweep
+        _stop(proc)
+        raise
     wall = time.perf_counter() - t0
     (folder / "sweep_run.log").write_text(f"$ {shlex.join(cmd)}\n# exit code {rc}, {wall:.3f} s\n"
                                           f"--- stdout\n{stdout}--- stderr\n{stderr}")
@@ -568,7 +587,11 @@ def main(argv):
     except QscError as exc:
         print(f"qsc sweep: error: {exc}")
         return EXIT_INPUT
-    rows = sweep(plan)
+    try:
+        rows = sweep(plan)
+    except KeyboardInterrupt:
+        print(f"qsc sweep: interrupted; the runs done are in {plan.out / 'sweep.csv'}")
+        return EXIT_INTERRUPTED
     if rows[0]["status"] != "ok":
         print(f"qsc sweep: the reference run did not succeed ({rows[0]['status']}: {rows[0]['message']}); "
               "no errors were computed")

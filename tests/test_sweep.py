@@ -176,3 +176,39 @@ def test_a_second_sweep_reuses_the_reference_run(tmp_path, capsys, mpi_env):
                   [*common, "--set", "contact.0.integration=gauss", "--vary", "contact.0.penalty=1e4"]):
         with pytest.raises(ValueError, match="reused reference"):
             sweep(make_plan([*other, "--out", str(tmp_path / "c")]), reference=first[0])
+
+
+def test_ctrl_c_stops_the_run_it_was_on(tmp_path, mpi_env):
+    """Ctrl-C on qsc sweep ended the sweep with a traceback while the run it was on (a session of its own) went on
+    without it and wrote "ok" that no sweep.csv listed (helper pass, session 25). The interrupt is passed on to
+    the run's process group (then SIGTERM, SIGKILL): the run stops, and the sweep says where the rows done are and
+    exits 130."""
+    import json
+    import signal
+    import subprocess
+    import sys
+    import time
+    out = tmp_path / "out"
+    cmd = [sys.executable, "-m", "qsc_petsc.cli", "sweep", str(CONFIGS / "block_compression.toml"),
+           "--vary", "ranks=1", "--set", "bodies.0.mesh.cells=[30,30,30]", "--set", "load.steps=12",
+           "--set", "solver.predictor=previous", "-qsc_ksp_type", "cg", "-qsc_pc_type", "jacobi", "--out", str(out)]
+    # this process's MPI (a singleton) left variables in the environment that stop a child's mpirun at once
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("OMPI_MCA_", "PMIX_", "OMPI_COMM", "OMPI_FIRST",
+                                                                      "OMPI_FILE", "OMPI_NUM", "OMPI_UNIVERSE"))}
+    # Ctrl-C as a terminal delivers it: not ignored (a job started in the background ignores it, and so would
+    # the sweep this process starts), restored in a launcher that then becomes the sweep
+    restore = ("import os, signal, sys; signal.signal(signal.SIGINT, signal.SIG_DFL); "
+               "os.execv(sys.executable, [sys.executable] + sys.argv[1:])")
+    launcher = [sys.executable, "-c", restore]
+    proc = subprocess.Popen(launcher + cmd[1:], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env)
+    deadline = time.time() + 60
+    while not (out / "reference" / "summary.json").is_file() and time.time() < deadline:
+        time.sleep(0.2)
+    time.sleep(1.0)              # inside the reference run, after its first step's summary (12 steps of ~1 s)
+    proc.send_signal(signal.SIGINT)
+    text, _ = proc.communicate(timeout=60)
+    assert proc.returncode == 130 and "qsc sweep: interrupted" in text and "Traceback" not in text, text
+    # stopped: "interrupted" when the rank wrote it before mpirun's SIGKILL followed its SIGTERM, else "running"
+    assert json.loads((out / "reference" / "summary.json").read_text())["status"] in ("interrupted", "running")
+    left = subprocess.run(["pgrep", "-f", str(out / "reference")], capture_output=True, text=True, check=False)
+    assert left.stdout.strip() == "", left.stdout
