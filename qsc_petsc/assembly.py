@@ -454,8 +454,7 @@ class _KernelCache:
             Ke = elasticity.stiffness(mesh.cell_type, mesh.coords[mesh.cells[c]], self.lmbda[c], self.mu[c],
                                       share_translates=False, ids=mesh.cell_orig[c])
         except elasticity.DegenerateCell as exc:      # named where the user can find it: body, file, cell there
-            raise MeshError(f"{mesh.describe_cell(exc.cell)} is inverted or degenerate"
-                            f"{str(exc).split('is inverted or degenerate', 1)[1]}") from None
+            raise MeshError(f"{mesh.describe_cell(exc.cell)} is inverted or degenerate: {exc.detail}") from None
         out[:, ~hit] = Ke.reshape(-1, k, 3, k, 3).transpose(2, 4, 0, 1, 3).reshape(9, -1, k * k)
         if self.last is not None:
             keep = self.last[reps] >= r1

@@ -71,11 +71,11 @@ def elasticity_matrix(lmbda, mu):
 
 
 class DegenerateCell(MeshError):
-    """A cell whose Jacobian is not positive: .cell its id (the ids given, else its row)."""
+    """A cell whose Jacobian is not positive: .cell its id (the ids given, else its row), .detail what was found."""
 
-    def __init__(self, cell, message):
-        super().__init__(message)
-        self.cell = cell
+    def __init__(self, cell_type, cell, detail):
+        super().__init__(f"{cell_type} cell {cell} is inverted or degenerate: {detail}")
+        self.cell, self.detail = cell, detail
 
 
 def _gradients(cell_type, xe, xi, ids=None, weights=None):
@@ -103,10 +103,9 @@ def _gradients(cell_type, xe, xi, ids=None, weights=None):
     bad = np.flatnonzero((~(relative > MIN_RELATIVE_DET)).any(axis=1))
     if len(bad):
         c = bad[0]
-        cell = int(c if ids is None else ids[c])
-        raise DegenerateCell(cell, f"{cell_type} cell {cell} is inverted or degenerate: "
-                                   f"det J = {detJ[c].min():.3g} at a quadrature point, {relative[c].min():.3g} "
-                                   f"relative to the cell's size (not above {MIN_RELATIVE_DET:g})")
+        raise DegenerateCell(cell_type, int(c if ids is None else ids[c]),
+                             f"det J = {detJ[c].min():.3g} at a quadrature point, {relative[c].min():.3g} relative "
+                             f"to the cell's size (not above {MIN_RELATIVE_DET:g})")
     scale = 1.0 / detJ if weights is None else np.sqrt(weights / detJ)
     # G_ai = dN_ak (J^-1)_ki with J^-1 = cof^T / det J: one (n, 3) x (3, 3m) GEMM per quadrature point
     Jinv = (np.array(cof) * scale).transpose(3, 1, 2, 0).reshape(nq, 3, 3 * m)   # [q, k, (m, i)]

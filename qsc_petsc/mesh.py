@@ -274,10 +274,11 @@ def build_global_mesh(scene):
         pieces.append(piece + len(piece_names))
         if n_pieces == 1:
             piece_names.append(body.name)
-        for k in range(n_pieces if n_pieces > 1 else 0):
-            centre = bm.points[np.unique(bm.cells[piece == k])].mean(axis=0)
-            piece_names.append(f"{body.name} piece {k + 1} of {n_pieces} (around "
-                               f"{', '.join(f'{c:.3g}' for c in centre)})")
+        else:
+            for k in range(n_pieces):
+                centre = bm.points[np.unique(bm.cells[piece == k])].mean(axis=0)
+                piece_names.append(f"{body.name} piece {k + 1} of {n_pieces} (around "
+                                   f"{', '.join(f'{c:.3g}' for c in centre)})")
         made = ("generated box" if spec.type == "box" else f"Hertz {spec.part} mesh" if spec.type == "hertz"
                 else f"mesh file {spec.path}")
         sources.append((n_cells, f"bodies[{b}] ({body.name}, {made})"))

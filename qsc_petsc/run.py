@@ -145,9 +145,7 @@ class Run:
         try:
             path = self.out / "summary.json"
             write_on_root(self.comm, path, lambda: write_json(path, summary))
-            path = self.out / "petsc_options.txt"
-            write_on_root(self.comm, path, lambda: path.write_text(
-                options.options_text(summary["petsc_options"], self.from_scene)))
+            self._write_options(summary["petsc_options"])
         except QscError:
             pass
 
@@ -358,8 +356,11 @@ class Run:
         with are what its user changes next (collective)."""
         in_effect = self.summary["petsc_options"] = options.options_in_effect()
         self.write_summary()
+        self._write_options(in_effect, self.system.settings())   # execute runs only on a built Run: it has a system
+
+    def _write_options(self, in_effect, settings=()):
+        """petsc_options.txt (collective)."""
         path = self.out / "petsc_options.txt"
-        settings = self.system.settings()          # execute runs only on a built Run: the system exists
         write_on_root(self.comm, path,
                       lambda: path.write_text(options.options_text(in_effect, self.from_scene, settings)))
 

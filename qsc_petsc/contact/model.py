@@ -24,9 +24,10 @@ from .penalty import gate_positions
 from .search import closest_faces
 
 # the edge band (search.closest_faces) of a nodal or Gauss point, as a fraction of its own element size: a point
-# that has slid past the opposite surface's edge keeps its whole row for the first tenth of this in-plane distance
-# beyond it (the lateral misfits of two bodies' bulging side faces, ~1e-3 h at 1 % strain), then fades out
-# (a band of 0.5 still left nodal two_pass unsettled on the sliding cubes, 0.1 and 0.02 settled alike)
+# that has slid past the opposite surface's edge (by more than it is off the face's plane) keeps its whole row for
+# the first tenth of this distance beyond it (the lateral misfits of two bodies' bulging side faces, ~1e-3 h at 1 %
+# strain), then fades out (a band of 0.5 still left nodal two_pass unsettled on the sliding cubes, 0.1 and 0.02
+# settled alike)
 EDGE_BAND = 0.1
 
 @dataclass
@@ -304,8 +305,7 @@ class ContactModel:
                 n = np.asarray(spec.normal, dtype=float)
                 u_die = t * np.asarray(spec.motion, dtype=float)
                 v = dd["nodes"]
-                gap = (X[v] + U[v] - np.asarray(spec.point) - u_die) @ n
-                near = gap <= dd["radius"]
+                near = -_die_depth(dd, X, U, t) <= dd["radius"]
                 dd["near"] = near                   # the nodes with rows (missed)
                 rows = row_builders.die_rows(mesh.gvert[v[near]], dd["area"][near], X[v[near]], spec.point, n,
                                              u_die, spec.condition == "sticking")
@@ -318,14 +318,10 @@ class ContactModel:
         search) and penetrate it at u, as "die[i] (name): n node(s)", or None (collective). A node farther than
         the search distance from a die at an increment's start went through it unheld (exit 0, no force)."""
         U, X = self.mesh.local_vectors(u), self.mesh.coords
-        for dd in self.dies:
-            spec, v = dd["spec"], dd["nodes"]
-            n = np.asarray(spec.normal, dtype=float)
-            depth = -((X[v] + U[v]) - np.asarray(spec.point) - self.t * np.asarray(spec.motion, dtype=float)) @ n
-            count = self.comm.allreduce(int((~dd.get("near", np.ones(len(v), bool)) & (depth > 0)).sum()),
-                                        op=MPI.SUM)
+        for dd in self.dies:             # dd["near"]: the nodes the increment's search (terms) gave rows
+            count = self.comm.allreduce(int((~dd["near"] & (_die_depth(dd, X, U, self.t) > 0)).sum()), op=MPI.SUM)
             if count:
-                return f"die[{dd['index']}] ({spec.name}): {count} node(s)"
+                return f"die[{dd['index']}] ({dd['spec'].name}): {count} node(s)"
         return None
 
     def prepare(self, t):
@@ -512,8 +508,9 @@ class ContactModel:
                 v = S.nodes[ok]
                 h = -found["signed_gap"][ok]          # penetration in the current configuration
                 p_own = np.einsum("pi,pi->p", F[_owned_rows(mesh, S.nodes)], S.normal) / S.area
-                entry[f"max_slip_{side}"] = self._max_slip(pd, side, S, T, ok & (p_own > 0), found)
-                step_slip = max(step_slip, self._max_slip(pd, side, S, T, ok & (p_own > 0), found, since="report"))
+                pressed = ok & (p_own > 0)
+                entry[f"max_slip_{side}"] = self._max_slip(pd, side, S, T, pressed, found)
+                step_slip = max(step_slip, self._max_slip(pd, side, S, T, pressed, found, since="report"))
                 tractions.setdefault(S.name, np.zeros(nvl))[S.nodes] += p_own
                 penetration[v, 0] = np.maximum(penetration[v, 0], h)
                 # touching: penetrating, or carrying contact force (rows linearised at an increment's start can
@@ -540,9 +537,8 @@ class ContactModel:
             entry["swap_indicator"] = abs(ms - mm) / max(abs(ms), abs(mm), 1e-300)
             entry["max_slip_step"] = step_slip
             entry["pressed_unfaced_nodes"] = pressed_unfaced
-            # the share of the slave's normal force those nodes carry (slave side; master side if larger)
-            entry["pressed_unfaced_share"] = max(unfaced_force["slave"] / max(entry["total_normal_force"], 1e-300),
-                                                 unfaced_force["master"] / max(entry["total_normal_force"], 1e-300))
+            # the share of the slave's normal force those nodes carry (on the side where it is larger)
+            entry["pressed_unfaced_share"] = max(unfaced_force.values()) / max(entry["total_normal_force"], 1e-300)
             summaries[f"contact[{pd['index']}] {pd['spec'].slave} / {pd['spec'].master}"] = entry
         for dd in self.dies:
             term = terms[f"die[{dd['index']}]"]
@@ -551,7 +547,7 @@ class ContactModel:
             spec = dd["spec"]
             n = np.asarray(spec.normal)
             v = dd["nodes"]
-            h = -((X[v] + U[v]) - np.asarray(spec.point) - self.t * np.asarray(spec.motion)) @ n
+            h = _die_depth(dd, X, U, self.t)
             penetration[v, 0] = np.maximum(penetration[v, 0], h)
             status[v, 0] = np.maximum(status[v, 0], (h >= -self.scene.solver.active_set_tolerance * dd["h"]))
             pressure = np.zeros(nvl)
@@ -680,6 +676,14 @@ def _nonzeros(G, comm):
     values = np.abs(G.getValuesCSR()[2])
     top = comm.allreduce(float(values.max(initial=0.0)), op=MPI.MAX)
     return comm.allreduce(int(np.count_nonzero(values > 1e-14 * top)), op=MPI.SUM)
+
+
+def _die_depth(dd, X, U, t):
+    """How far each of a die's nodes (dd["nodes"]) lies past its plane at load factor t (positive: penetrating),
+    X and U the local coordinates and displacements."""
+    spec, v = dd["spec"], dd["nodes"]
+    u_die = t * np.asarray(spec.motion, dtype=float)
+    return -((X[v] + U[v] - np.asarray(spec.point)) - u_die) @ np.asarray(spec.normal, dtype=float)
 
 
 def _term_force(term, u):

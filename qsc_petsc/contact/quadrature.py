@@ -52,8 +52,9 @@ def found_pass(points, found, t_gids, t_xref, t_size, faced=None):
     """The Pass of the points that found a T face; found is search.closest_faces' dict for points["x_cur"].
 
     points: dict with x_ref, weight, size, node and optionally source_nodes, source_shape
-    (nodal quadrature when absent); a point's weight is scaled by its edge_factor (search.closest_faces). t_gids (k, nv), t_xref (k, nv, 3), t_size (k,): the T
-    faces given to the search; faced: faced_points(found, t_xref) when the caller has it already.
+    (nodal quadrature when absent); a point's weight is scaled by its edge_factor (search.closest_faces).
+    t_gids (k, nv), t_xref (k, nv, 3), t_size (k,): the T faces given to the search; faced:
+    faced_points(found, t_xref) when the caller has it already.
     """
     ok = found["face"] >= 0
     f = found["face"][ok]
@@ -61,8 +62,8 @@ def found_pass(points, found, t_gids, t_xref, t_size, faced=None):
     x_target = (faced_points(found, t_xref) if faced is None else faced)[ok]
     delta0 = np.einsum("pi,pi->p", points["x_ref"][ok] - x_target, found["normal"][ok])
     src = points.get("source_nodes")
-    return Pass(node=points["node"][ok], area=points["weight"][ok] * found["edge_factor"][ok], size=points["size"][ok],
-                target_nodes=np.asarray(t_gids)[f], shape=N, normal=found["normal"][ok], delta0=delta0,
+    return Pass(node=points["node"][ok], area=points["weight"][ok] * found["edge_factor"][ok],
+                size=points["size"][ok], target_nodes=np.asarray(t_gids)[f], shape=N, normal=found["normal"][ok], delta0=delta0,
                 target_size=np.asarray(t_size)[f], source_nodes=None if src is None else src[ok],
                 source_shape=None if src is None else points["source_shape"][ok])
 

@@ -14,8 +14,7 @@ from qsc_petsc.contact.geometry import _dot, project_on_faces
 # distances equal within TIE_TOL * (face size) are a tie, decided by the face key
 TIE_TOL = 1e-9
 # closest_faces' edge band: points within this fraction of it past an edge keep their whole weight (a point on
-# a symmetry plane beside a curved surface's edge lies ~1e-5 of the band off it, one over a convex kink with a
-# small gap lies gap x sin(kink / 2) off)
+# a symmetry plane beside a curved surface's edge lies ~1e-5 of the band past it)
 EDGE_FULL = 0.1
 # a face may cover this many grid cells on average before the cells are made coarser
 _MAX_CELLS_PER_FACE = 27
