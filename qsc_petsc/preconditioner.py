@@ -31,7 +31,7 @@ from contextlib import nullcontext
 import numpy as np
 from petsc4py import PETSc
 
-from .options import insert_options, option_value, remove_options, set_from_options
+from .options import insert_options, more_mumps_workspace, option_value, remove_options, set_from_options
 
 AMG_TYPES = ("hypre", "gamg")        # the band's partner: the first is the default
 # BoomerAMG: cheaper V-cycles than hypre's defaults (about half the operator complexity, measured) at the
@@ -222,6 +222,7 @@ class BandSolve:
         set_from_options(ksp, "contact band's solve (-qsc_band_*)")
         self.ksp = ksp
         self.sub = self.xb = self.yb = self.rows = None
+        self.own_options = set()          # options set here (more MUMPS workspace), removed by destroy
 
     def set_up(self, P):
         self.sub = P.createSubMatrix(self.iset, self.iset, submat=self.sub)
@@ -235,6 +236,14 @@ class BandSolve:
             self.xb, self.yb = self.sub.createVecs()
             self.rows = self.iset.getIndices() - P.getOwnershipRange()[0]   # local positions
         self.ksp.setUp()
+        pc = self.ksp.getPC()
+        # MUMPS's workspace estimate can fall short on several ranks (configs/stiff_plate.toml with Gauss rows,
+        # 2 ranks: INFOG(1) = -9 from the AMF ordering's factors, and the band's solve gave inf): relaxed and
+        # factored again, as System does for its own factors
+        while (pc.getType() in ("lu", "cholesky") and pc.getFactorSolverType() == "mumps"
+               and more_mumps_workspace(pc, "qsc_band_", self.own_options) is not None):
+            self.ksp.setOperators(self.sub)
+            self.ksp.setUp()
 
     def solve(self, rhs):
         """The band's solve of rhs (this rank's band entries, an array, in the order of `rows`); returns the
@@ -244,6 +253,7 @@ class BandSolve:
         return self.yb.getArray(readonly=True)
 
     def destroy(self):
+        remove_options(self.own_options)
         for obj in (self.ksp, self.sub, self.xb, self.yb, self.iset):
             if obj is not None:
                 obj.destroy()

@@ -24,10 +24,6 @@ KSP_REASONS = {v: k for k, v in vars(PETSc.KSP.ConvergedReason).items() if not k
 SUBSET = PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN
 PETSC_ERR_NOT_CONVERGED = 91   # raised instead of a reason under -qsc_ksp/snes_error_if_not_converged
 PETSC_ERR_MISSING_FACTOR = 92  # MatGetFactor: no package provides that factorization of that matrix type
-# MUMPS INFOG(1) when one of its work arrays was too small (numerical pivoting delayed more pivots than the
-# analysis foresaw): more memory relaxation ICNTL(14) cures it; measured on a 1.7k-dof patch test on 3 ranks
-MUMPS_WORKSPACE_ERRORS = (-8, -9, -14, -15, -17, -20)
-MUMPS_MAX_RELAXATION = 1000    # percent
 # MUMPS INFOG(1) when its factorization would take more memory than it may: over the ICNTL(23) cap (-19), or an
 # allocation the system refused (-13); with a cap set, a work array too small within it (-9) is the same want
 MUMPS_MEMORY_ERRORS = (-19, -13)
@@ -860,7 +856,7 @@ class System:
         pc = self.snes.getKSP().getPC()
         F = pc.getFactorMatrix()
         error = F.getMumpsInfog(1)
-        if error in MUMPS_MEMORY_ERRORS or (error in MUMPS_WORKSPACE_ERRORS and self.mumps_cap is not None):
+        if error in MUMPS_MEMORY_ERRORS or (error in options.MUMPS_WORKSPACE_ERRORS and self.mumps_cap is not None):
             cap, lift = "", ""
             if self.mumps_cap is not None:
                 cap = f"{self.mumps_cap[0]} MB a rank ({self.mumps_cap[1]})"
@@ -871,17 +867,10 @@ class System:
                 f"MUMPS's factorization: {want}; its estimate after the analysis was {F.getMumpsInfog(16)} MB on "
                 f"its largest rank, {F.getMumpsInfog(17)} MB in all (INFOG(1) = {error}; INFOG(16), INFOG(17)). "
                 f"Use the iterative default (no -qsc_pc_type lu) or more nodes{lift}")
-        relax = 2 * max(F.getMumpsIcntl(14), 20)
-        if error not in MUMPS_WORKSPACE_ERRORS or relax > MUMPS_MAX_RELAXATION:
+        relax = options.more_mumps_workspace(pc, options.PREFIX, self.own_options)
+        if relax is None:
             return False
-        name = "qsc_mat_mumps_icntl_14"      # read when a factor is made; the user's own value stands
-        opts = PETSc.Options()
-        if opts.hasName(name) and name not in self.own_options:
-            return False
-        opts.setValue(name, relax)
-        self.own_options.add(name)
         self.mumps_relaxation = relax
-        pc.reset()        # PETSc skips the numeric factorization of a failed MUMPS factor: make a new one
         return True
 
     def settings(self):
@@ -1012,8 +1001,9 @@ def solve_load_step(system, step, t_prev, t_target, u, update_terms, max_cutback
     converged u and returns (terms, settled); while not settled the try is solved again from u on those terms,
     and a try whose searches (update_terms' included) reach max_searches unsettled fails (SEARCH_NOT_SETTLED),
     so its increment is halved like any failed one.
-    missed (dies; ContactModel.missed): after a converged try, the nodes that were out of a die's reach at the
-    increment's start and went through it, or None; a try with some fails (OUT_OF_REACH) and is halved.
+    missed (dies, finite-sliding pairs; ContactModel.missed): after a converged try, the nodes that were out of a
+    die's or pair's reach at the increment's start and went through it, or None; a try with some fails
+    (OUT_OF_REACH) and is halved.
     A body that the boundary conditions and every contact row within reach leave free is a scene
     error (System.free_motions); a failed solve names what its iterates left free."""
     dt = t_target - t_prev
@@ -1081,8 +1071,11 @@ def solve_load_step(system, step, t_prev, t_target, u, update_terms, max_cutback
                        f"stiffer it is)" + ("; a tolerance below 1e-12 may be under the solve's round-off"
                                             if tol < 1e-12 else ""))
             if stats["snes_reason"] == "OUT_OF_REACH":
-                why = (f"; {stats['out_of_reach']} out of the die's reach at the increment's start went through it "
-                       f"(raise die[i].search_distance, or use more load steps)")
+                what = stats["out_of_reach"]
+                why = (f"; {what} out of the die's reach at the increment's start went through it "
+                       f"(raise die[i].search_distance, or use more load steps)" if what.startswith("die") else
+                       f"; {what} out of the pair's reach at the increment's start (no row) penetrate the other "
+                       f"surface (raise contact[i].search_distance, use more load steps, or sliding = \"large\")")
             if stats["snes_reason"] == "SEARCH_NOT_SETTLED":
                 why = (f"; the rows of the large-sliding pairs had not settled after {max_searches} searches "
                        f"(contact[i].max_searches; more load steps slide less per increment)")

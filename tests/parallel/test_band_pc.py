@@ -343,3 +343,28 @@ def test_a_contact_that_did_not_slide_keeps_the_preconditioner(comm, mpi_tmp):
     _, _, kept = _increments(comm, mpi_tmp / "out", path, ["bodies.0.mesh.cells=[4,4,4]", "bodies.1.mesh.cells=[6,6,6]",
                                                            "contact.0.reuse_tolerance=0"])
     assert kept
+
+
+def test_band_gets_more_mumps_workspace_when_its_estimate_falls_short(comm, mpi_tmp):
+    """configs/stiff_plate.toml with Gauss rows: on 2 ranks MUMPS's Cholesky of the band (AMF ordering) ran out of
+    the workspace its analysis estimated (INFOG(1) = -9), and the band's solve returned inf: KSP DIVERGED_NANORINF
+    at every cutback, exit 3 (a test pass of every config with each integration rule, session 26). The band is
+    factored again with twice the memory relaxation ICNTL(14), as System does for its own factors; the option
+    it set leaves the database with the run."""
+    from petsc4py import PETSc
+
+    from qsc_petsc.run import Run
+    from qsc_petsc.scene import load_scene
+    run = Run(load_scene(CONFIGS / "stiff_plate.toml", ["contact.0.integration=\"gauss\"", "output.xdmf=false"]),
+              comm, mpi_tmp / "out", log=lambda *a: None)
+    summary = run.execute()
+    band = run.system.snes.getKSP().getPC().getPythonContext().band
+    F = band.ksp.getPC().getFactorMatrix()
+    assert F.getMumpsInfog(1) == 0
+    relaxed = band.own_options
+    run.destroy()
+    assert summary["status"] == "ok"
+    assert all(st["cutbacks"] == 0 for st in summary["steps"])
+    if comm.size == 2:            # Debian's MUMPS 5.5.1 on this partition (3 ranks factor it at once)
+        assert relaxed == {"qsc_band_mat_mumps_icntl_14"}
+    assert not PETSc.Options().hasName("qsc_band_mat_mumps_icntl_14")
