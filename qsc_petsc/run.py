@@ -294,6 +294,8 @@ class Run:
         max_searches = max((pair.max_searches for pair in large), default=2)
         augmented_max = max((pair.augmented_max_iterations for pair in scene.contact
                              if pair.enforcement == "augmented_lagrangian"), default=25)
+        # dies and finite-sliding pairs: nodes out of reach at an increment's start that went through (missed)
+        guarded = bool(scene.die) or any(pair.sliding == "finite" for pair in scene.contact)
         before = None         # the converged state before u, (t, Vec), while the predictor extrapolates
         last_loose = ""       # the last step's loose motions (Restraint.loose), warned when they change
         try:
@@ -304,7 +306,7 @@ class Run:
                         system, step, t_prev, t, u, update, scene.solver.max_cutbacks,
                         augmented_max=augmented_max, log=self.log,
                         before=before, predict=scene.solver.predictor == "extrapolate", settle=settle,
-                        max_searches=max_searches, missed=self.contact.missed if scene.die else None)
+                        max_searches=max_searches, missed=self.contact.missed if guarded else None)
                 with self.phases("output"):
                     point, cell, ul = self.fields(u)
                     record = self._step_record(step, t, stats, u, ul)

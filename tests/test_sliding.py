@@ -180,6 +180,68 @@ def test_finite_sliding_searches_anew_where_the_contact_slid(tmp_path):
                                                                           a["max_penetration_slave"])
 
 
+TILT = """\
+name = "tilt"
+[[bodies]]
+name = "lower"
+mesh = { type = "box", origin = [-0.5, -0.5, 0.0], size = [2.0, 1.0, 1.0], cells = [8, 4, 4] }
+material = { youngs_modulus = 1000.0, poissons_ratio = 0.3 }
+[[bodies]]
+name = "upper"
+mesh = { type = "box", origin = [0.0, -0.25, 1.0642], size = [1.0, 0.5, 0.5], cells = [4, 2, 2], rotation = [0.0, -20.0, 0.0] }
+material = { youngs_modulus = 1000.0, poissons_ratio = 0.3 }
+[[contact]]
+slave = "upper.zmin"
+master = "lower.zmax"
+formulation = "quasi_symmetric"
+[[die]]
+name = "floor"
+point = [0.0, 0.0, 0.0]
+normal = [0.0, 0.0, 1.0]
+surfaces = ["lower.zmin"]
+condition = "sticking"
+[[boundary]]
+surface = "upper.zmax"
+type = "displacement"
+ux = 0.0
+uy = 0.0
+uz = -0.4
+[load]
+steps = 1
+[petsc]
+ksp_type = "preonly"
+pc_type = "lu"
+pc_factor_mat_solver_type = "mumps"
+"""
+
+
+def test_finite_sliding_nodes_out_of_reach_cannot_go_in_unheld(tmp_path):
+    """A block tilted 20 degrees whose far end starts 0.34 m above the lower block (the pair's reach: 0.25 m)
+    pushed down 0.4 m in one step: its far slave nodes had no row at the step's start and ended 0.005-0.012 m
+    inside the lower block with no force, exit 0 (a helper's test pass, session 25). A converged try that leaves
+    nodes out of the pair's reach inside the other surface fails (OUT_OF_REACH) and is halved, so every node that
+    penetrates carries force and the answer is that of more load steps."""
+    path = tmp_path / "tilt.toml"
+    path.write_text(TILT)
+    _, one = run_scene(path, tmp_path / "one")
+    step = one["steps"][0]
+    assert one["status"] == "ok" and step["cutbacks"] >= 1
+    assert step["solves"][0]["snes_reason"] == "OUT_OF_REACH"
+    import h5py
+    with h5py.File(tmp_path / "one" / "solution.h5", "r") as h5:
+        penetration = h5["step_0001/contact_penetration"][:, 0]
+        traction = h5["step_0001/contact_traction"][:, 0]
+    inside = penetration > 1e-3
+    assert inside.sum() >= 10 and np.all(traction[inside] > 0)
+    _, eight = run_scene(path, tmp_path / "eight", ["load.steps=8"])
+    assert not any(s["cutbacks"] for s in eight["steps"])
+    forces = [next(iter(r["steps"][-1]["contact"].values()))["total_normal_force"] for r in (one, eight)]
+    assert forces[0] == pytest.approx(forces[1], rel=5e-3)
+    with pytest.raises(ConvergenceError, match=r"contact\[0\] \(upper.zmin / lower.zmax\): \d+ node\(s\) out of the "
+                                               r"pair's reach .*\(raise contact\[i\].search_distance"):
+        run_scene(path, tmp_path / "none", ["solver.max_cutbacks=0"])
+
+
 def test_kept_rows_let_a_later_increment_start_on_the_answer(tmp_path):
     """Iterative defaults: an increment on kept rows starts from the linear extrapolation of the last two
     states, exact for those rows while the active set holds, so it needs one Newton step and a Krylov

@@ -314,14 +314,40 @@ class ContactModel:
         return out
 
     def missed(self, u):
-        """After a converged solve: the first die with nodes that had no row (out of its reach at the increment's
-        search) and penetrate it at u, as "die[i] (name): n node(s)", or None (collective). A node farther than
-        the search distance from a die at an increment's start went through it unheld (exit 0, no force)."""
-        U, X = self.mesh.local_vectors(u), self.mesh.coords
+        """After a converged solve: the first die or finite-sliding pair with nodes that had no row (out of its
+        reach at the increment's search) and penetrate at u, as "die[i] (name): n node(s)" or "contact[i]
+        (slave / master): n node(s)", or None (collective). A node farther than the search distance at an
+        increment's start went through the die, or into the other surface, unheld (exit 0, no force).
+
+        A pair's nodes are those of the sides that hold rows (the slave's; two_pass: the master's too): one
+        without a row that now faces the other surface fully (edge_factor 1: not merely beside its edge) and
+        penetrates it. Large sliding needs no check (its searches settle at the converged state), small
+        sliding's rows are the run's by choice."""
+        mesh = self.mesh
+        U, X = mesh.local_vectors(u), mesh.coords
         for dd in self.dies:             # dd["near"]: the nodes the increment's search (terms) gave rows
             count = self.comm.allreduce(int((~dd["near"] & (_die_depth(dd, X, U, self.t) > 0)).sum()), op=MPI.SUM)
             if count:
                 return f"die[{dd['index']}] ({dd['spec'].name}): {count} node(s)"
+        terms = {t.name: t for t in self.current}
+        for pd in self.pairs:
+            if pd["spec"].sliding != "finite":
+                continue
+            W = terms[f"contact[{pd['index']}]"].W.getArray().reshape(-1, 3)[:, 0]
+            count = 0
+            for S, T in ((pd["slave"], pd["master"]), (pd["master"], pd["slave"])):
+                held = W[_owned_rows(mesh, S.nodes)] > 0
+                if not self.comm.allreduce(bool(held.any()), op=MPI.LOR):
+                    continue                 # a side without rows (master_slave's master)
+                v = S.nodes[~held]
+                points = {"x_cur": X[v] + U[v], "x_ref": X[v], "node": mesh.gvert[v], "weight": S.area[~held],
+                          "size": S.size[~held]}
+                found = _search_pass(mesh, T, X, U, pd["radius"], points)[2]
+                tol = self.scene.solver.active_set_tolerance * pd["h_eff"]
+                count += int(((found["edge_factor"] == 1.0) & (-found["signed_gap"] > tol)).sum())
+            count = self.comm.allreduce(count, op=MPI.SUM)
+            if count:
+                return f"contact[{pd['index']}] ({pd['spec'].slave} / {pd['spec'].master}): {count} node(s)"
         return None
 
     def prepare(self, t):
