@@ -155,6 +155,24 @@ def test_cells_listed_twice_are_used_once(tmp_path, capsys):
     assert "5 of 53 tetra cells are listed more than once" in capsys.readouterr().out
 
 
+def test_overlapping_cells_are_refused(tmp_path):
+    """A cell laid over others (a face then shared by three cells) was accepted: 2 % off in displacement, exit 0
+    (a helper's test pass, session 26). A face of more than two cells is a MeshError naming the cells."""
+    box = box_mesh(ORIGIN, SIZE, (2, 2, 2), "tet")
+    table = fem.CELL_FACES["tet"]
+    faces = np.sort(box.cells[:, table].reshape(-1, 3), axis=1)
+    _, first, count = np.unique(faces, axis=0, return_index=True, return_counts=True)
+    k = first[np.flatnonzero(count == 2)[0]]                    # an inner face, of cell k // 4 and another
+    cell, face = box.cells[k // 4], faces[k]
+    other = next(v for v in range(len(box.points)) if v not in cell and
+                 not any(set(face) | {v} == set(c) for c in box.cells.tolist()))
+    extra = np.array([[*face, other]])
+    meshio.write(tmp_path / "overlap.vtu", meshio.Mesh(box.points, [("tetra", np.vstack([box.cells, extra]))]))
+    with pytest.raises(MeshError, match=r"overlap.vtu: 1 face\(s\) belong to more than two tetra cells \(the cells "
+                                        rf"overlap\), e.g. tetra cells \d+, \d+, {len(box.cells)} \(0-based"):
+        read_mesh_file(tmp_path / "overlap.vtu")
+
+
 def test_cell_pieces_counts_unconnected_parts():
     """Cells that share a vertex are one piece; pieces are numbered by their first cell."""
     a = box_mesh(ORIGIN, SIZE, (3, 2, 2), "tet")
