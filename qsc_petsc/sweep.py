@@ -514,6 +514,9 @@ def mark_pareto(rows):
         eligible[i]["pareto"] = True
 
 
+TABLES = ("sweep.csv", "sweep.md", "pareto.png")      # what write_outputs writes
+
+
 def write_outputs(plan, rows, command):
     """sweep.csv, sweep.md and pareto.png into the output folder; marks the Pareto rows first."""
     mark_pareto(rows)
@@ -540,6 +543,8 @@ def sweep(plan, say=print, reference=None):
             raise ValueError(f"the reused reference ran {shlex.join(reference.get('command', []))}; this "
                              f"sweep's reference would run {shlex.join(expected)}")
     plan.out.mkdir(parents=True, exist_ok=True)
+    for name in TABLES:            # an earlier sweep's tables are not this one's (until its reference is done)
+        (plan.out / name).unlink(missing_ok=True)
     command = "qsc sweep " + shlex.join(plan.argv)
     combos = plan.combinations()
     n = len(combos) + 1
@@ -590,7 +595,9 @@ def main(argv):
     try:
         rows = sweep(plan)
     except KeyboardInterrupt:
-        print(f"qsc sweep: interrupted; the runs done are in {plan.out / 'sweep.csv'}")
+        table = plan.out / "sweep.csv"
+        print(f"qsc sweep: interrupted; the runs done are in {table}" if table.is_file() else
+              f"qsc sweep: interrupted before any run was done (the reference's folder: {plan.out / 'reference'})")
         return EXIT_INTERRUPTED
     if rows[0]["status"] != "ok":
         print(f"qsc sweep: the reference run did not succeed ({rows[0]['status']}: {rows[0]['message']}); "

@@ -208,7 +208,9 @@ def test_ctrl_c_stops_the_run_it_was_on(tmp_path, mpi_env):
     time.sleep(1.0)              # inside the reference run, after its first step's summary (12 steps of ~1 s)
     proc.send_signal(signal.SIGINT)
     text, _ = proc.communicate(timeout=60)
-    assert proc.returncode == 130 and "qsc sweep: interrupted" in text and "Traceback" not in text, text
+    assert proc.returncode == 130 and "Traceback" not in text, text
+    # no sweep.csv to point to yet (it named one that did not exist)
+    assert "qsc sweep: interrupted before any run was done" in text and not (out / "sweep.csv").exists(), text
     # stopped: "interrupted" when the rank wrote it before mpirun's SIGKILL followed its SIGTERM, else "running"
     assert json.loads((out / "reference" / "summary.json").read_text())["status"] in ("interrupted", "running")
     left = []                                        # processes still naming the run's folder (no pgrep in the image)
