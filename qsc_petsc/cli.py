@@ -121,8 +121,16 @@ def main(argv=None):
         release(run)
         return EXIT_INPUT
     except KeyboardInterrupt:
-        say("qsc: interrupted")
-        return 130
+        if comm.size == 1:
+            say("qsc: interrupted")
+            return 130
+        # in parallel the signal may have reached this rank alone (a kill of one process, or every rank at a
+        # different point): the others wait in a collective call, and so would this one's clean-up (PETSc's
+        # destructors, MPI's finalize), for ever. The finished steps are on disk: end the job.
+        sys.stderr.write(f"qsc: interrupted (rank {comm.rank}); ending the job\n")
+        sys.stderr.flush()
+        sys.stdout.flush()
+        comm.Abort(130)
     except Exception:  # noqa: BLE001 - a bug: print it and abort, never leave other ranks waiting
         sys.stderr.write(f"[rank {comm.rank}] internal error:\n{traceback.format_exc()}")
         sys.stderr.flush()

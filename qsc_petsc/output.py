@@ -41,6 +41,20 @@ def check_output_folder(directory):
         raise OutputError(f"output: cannot write in {str(directory)!r}: permission denied")
 
 
+def clear_results(directory):
+    """An earlier run's results in `directory` removed (rank 0, at a run's start): a run stopped in its set-up or
+    first step, or one without XDMF output, left them beside its own, another scene's fields under this run's
+    name. Only the names a run writes go (RESULTS, the step files, temporary files of an atomic write)."""
+    steps = directory / "steps"
+    stale = [directory / name for name, folder in RESULTS if not folder]
+    stale += [p for p in directory.glob("*.tmp") if p.name[:-4] in dict(RESULTS)]
+    if steps.is_dir():
+        stale += list(steps.glob("step_*.xdmf")) + list(steps.glob("step_*.xdmf.tmp"))
+    for path in stale:
+        if path.is_file():
+            path.unlink()
+
+
 def write_on_root(comm, path, fn):
     """fn() on rank 0, which writes `path`; an OSError there becomes the same OutputError on every rank, so that
     all fail together (collective)."""
@@ -86,11 +100,6 @@ class ResultWriter:
             with h5py.File(self.directory / "solution.h5", "w") as h5:
                 h5["mesh/geometry"] = points
                 h5["mesh/topology"] = cells
-            # an earlier run's XDMF files in this folder point into the solution.h5 just rewritten: unreadable now
-            # (a folder in the way of a file is left to the write that meets it, which names it)
-            for stale in [self.directory / "solution.xdmf", *(self.directory / "steps").glob("step_*.xdmf*")]:
-                if stale.is_file():
-                    stale.unlink()
             self.shape = (len(points), cells.shape)
         write_on_root(self.comm, self.directory / "solution.h5", write)
 

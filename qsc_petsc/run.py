@@ -13,9 +13,9 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from . import __version__, assembly, elasticity, lattice, options, preconditioner
-from .errors import QscError, SceneError
+from .errors import OutputError, QscError, SceneError
 from .mesh import distribute_mesh, on_root
-from .output import ResultWriter, check_output_folder, write_json, write_on_root
+from .output import ResultWriter, check_output_folder, clear_results, write_json, write_on_root
 from .restraint import Restraint, describe
 from .solver import System, solve_load_step
 
@@ -113,6 +113,10 @@ def prepare_output(scene, out_dir, comm):
         except OSError as exc:
             raise SceneError(f"output.directory: cannot create {str(directory)!r}: {exc.strerror}") from None
         check_output_folder(directory)
+        try:
+            clear_results(directory)
+        except OSError as exc:
+            raise OutputError(f"output: cannot remove the earlier run's {str(exc.filename)!r}: {exc.strerror}") from None
     on_root(comm, make)
     return directory
 
@@ -193,6 +197,7 @@ class Run:
         path = self.out / "scene.resolved.toml"
         write_on_root(comm, path, lambda: path.write_text(scene.to_toml()))
         self.summary = self._summary_header()
+        self.write_summary()          # "running", from the end of the set-up on
 
     def _summary_header(self):
         mesh = self.mesh
@@ -343,10 +348,16 @@ class Run:
             raise
         except KeyboardInterrupt:
             # Ctrl-C: serially the folder can still say so (summary.json read "running" for ever); in parallel the
-            # ranks stop wherever the signal found them, and writing would need them all
+            # ranks stop wherever the signal found them, so rank 0, if the signal reached it, writes the summary it
+            # holds (the finished steps) alone, with no collective call (the CLI then ends the job)
+            self.summary["status"] = "interrupted"
             if self.comm.size == 1:
-                self.summary["status"] = "interrupted"
                 self._finish()
+            elif self.comm.rank == 0:
+                try:
+                    write_json(self.out / "summary.json", self.summary)
+                except OSError:
+                    pass              # interrupted all the same; the folder keeps the last step's summary
             raise
         self.summary["status"] = "ok"
         self._finish()

@@ -697,3 +697,40 @@ def test_petsc_detail_quotes_the_innermost_routine_and_its_specifics():
     assert petsc_detail(Fake("error code 55\n[1] MatMult() at matrix.c:2\n[1] Out of memory")) == \
         "MatMult(): Out of memory"
     assert petsc_detail(Fake("error code 76")) == "a routine PETSc did not name"
+
+
+@pytest.mark.skipif(MPIRUN is None, reason="mpirun not found")
+@pytest.mark.parametrize("which", [0, 1])
+def test_a_signal_to_one_rank_ends_the_job(tmp_path, which):
+    """SIGTERM to one rank of a 2-rank run (a kill of one process; a batch system's kill reaches the ranks at
+    different points): that rank's clean-up waited in a collective call (MUMPS's destroy, MPI's finalize)
+    while the other waited in the solve, for ever (a helper's test pass, session 26). The signalled rank now
+    ends the job (MPI_Abort, exit 130); the finished steps stay, and rank 0, when signalled, says
+    "interrupted" in summary.json."""
+    serial_only()
+    import time
+    out = tmp_path / "out"
+    cmd = [MPIRUN, "-n", "2"] + QSC + ["run", str(CONFIGS / "block_compression.toml"), "--out", str(out),
+                                       "--set", "bodies.0.mesh.cells=[24,24,24]", "--set", "load.steps=40",
+                                       "--set", "solver.predictor=\"previous\"", "-qsc_ksp_type", "cg",
+                                       "-qsc_pc_type", "jacobi"]
+    proc = subprocess.Popen(cmd, env=ENV, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            start_new_session=True)
+    try:
+        deadline = time.time() + 60
+        summary = out / "summary.json"
+        while not (summary.is_file() and json.loads(summary.read_text())["steps"]) and time.time() < deadline:
+            time.sleep(0.2)
+        ranks = sorted(int(p) for p in (Path("/proc") / str(proc.pid) / "task" / str(proc.pid) / "children")
+                       .read_text().split())
+        assert len(ranks) == 2, ranks
+        os.kill(ranks[which], signal.SIGTERM)
+        text, _ = proc.communicate(timeout=30)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.communicate()
+        pytest.fail(f"the job still ran 30 s after rank {which} was sent SIGTERM")
+    assert proc.returncode == 130, text
+    assert f"qsc: interrupted (rank {which}); ending the job" in text and "Traceback" not in text, text
+    done = json.loads(summary.read_text())
+    assert done["steps"] and done["status"] == ("interrupted" if which == 0 else "running")

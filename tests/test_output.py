@@ -322,6 +322,39 @@ def test_an_interrupted_run_says_so(tmp_path, monkeypatch):
     assert (tmp_path / "out" / "petsc_options.txt").is_file()
 
 
+def test_a_run_clears_an_earlier_runs_results_from_its_folder(tmp_path):
+    """A run into a used folder (a helper's test pass, session 26): with output.xdmf = false it left the earlier
+    run's solution.h5, solution.xdmf and steps/ (another scene's mesh and fields beside this run's summary); a
+    set-up stopped by bad input left them and the old scene.resolved.toml; while step 1 ran, and for ever if
+    the run died there, the folder showed the old summary.json as "ok". A run now removes the results a run
+    writes (and nothing else) when it starts, and writes a "running" summary at the end of its set-up."""
+    from qsc_petsc.errors import QscError
+    from qsc_petsc.run import Run
+    out = tmp_path / "out"
+    run, _ = run_scene(CONFIGS / "two_cubes_dies.toml", out)
+    run.destroy()
+    (out / "notes.txt").write_text("the user's")
+    assert (out / "steps" / "step_0002.xdmf").is_file()
+    run, summary = run_scene(CONFIGS / "patch_test.toml", out, ["output.xdmf=false"])
+    run.destroy()
+    assert summary["status"] == "ok"
+    left = sorted(p.relative_to(out).as_posix() for p in out.rglob("*") if p.is_file())
+    assert left == ["notes.txt", "petsc_options.txt", "scene.resolved.toml", "summary.json"]
+    assert 'name = "patch_test"' in (out / "scene.resolved.toml").read_text()
+    run, _ = run_scene(CONFIGS / "two_cubes_dies.toml", out)
+    run.destroy()
+    with pytest.raises(QscError):
+        run_scene(CONFIGS / "patch_test.toml", out, ["petsc.pc_type=bogus"])
+    left = sorted(p.relative_to(out).as_posix() for p in out.rglob("*") if p.is_file())
+    assert left == ["notes.txt", "petsc_options.txt", "summary.json"]
+    assert json.loads((out / "summary.json").read_text())["status"] == "failed"
+    from mpi4py import MPI
+    run = Run(load_scene(CONFIGS / "patch_test.toml"), MPI.COMM_WORLD, out, log=lambda *a: None)
+    summary = json.loads((out / "summary.json").read_text())
+    run.destroy()
+    assert (summary["scene"], summary["status"], summary["steps"]) == ("patch_test", "running", [])
+
+
 # ---------------------------------------------------------------- rank independence
 
 def test_two_ranks_write_the_same_results(serial, parallel):
