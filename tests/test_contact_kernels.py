@@ -346,6 +346,31 @@ def test_closest_faces_fades_points_past_the_surface_edge():
     np.testing.assert_allclose(ridge["edge_factor"], [1.0, 1.0])
 
 
+def test_a_point_keeps_its_face_at_a_kink_within_the_keep_distance():
+    """Two faces meeting at x = 0.5 with a slight kink (a roof of slope 0.01): a point just over the left face
+    is nearest to it; given the right face as the face it took at the last search, it keeps that face while the
+    right face lies within keep_within of the nearest, and takes the nearest beyond. Large sliding's searches
+    had swung such points between the two faces for ever (session 26). The keys of the faces taken come back."""
+    xyz = np.array([[0.0, 0, -0.005], [0.5, 0, 0], [0.5, 1, 0], [0.0, 1, -0.005], [1.0, 0, -0.005],
+                    [1.0, 1, -0.005]])
+    faces = np.array([[0, 1, 2, 3], [1, 4, 5, 2]])
+    key = np.sort(faces, axis=1)
+    pts = np.array([[0.4999, 0.5, 1e-4], [0.49, 0.5, 1e-4]])
+    plain = closest_faces(pts, xyz[faces], "quad", key, 0.2)
+    np.testing.assert_array_equal(plain["face"], [0, 0])
+    np.testing.assert_array_equal(plain["key"], key[[0, 0]])
+    right = np.repeat(key[1:2], 2, axis=0)
+    kept = closest_faces(pts, xyz[faces], "quad", key, 0.2, keep=right, keep_within=np.full(2, 1e-3))
+    np.testing.assert_array_equal(kept["face"], [1, 0])        # the second lies 1e-2 into the left face
+    np.testing.assert_array_equal(kept["key"], key[[1, 0]])
+    gap = kept["signed_gap"][0]
+    assert abs(gap - plain["signed_gap"][0]) < 0.03 * gap   # the kept face's gap: the nearest's, to the kink's order
+    none = closest_faces(pts, xyz[faces], "quad", key, 0.2, keep=np.full((2, 4), -1), keep_within=np.full(2, 1e-3))
+    np.testing.assert_array_equal(none["face"], [0, 0])
+    far = closest_faces(pts + [0, 0, 5], xyz[faces], "quad", key, 0.2, keep=right, keep_within=np.full(2, 1e-3))
+    np.testing.assert_array_equal(far["key"], np.full((2, 4), -1))
+
+
 # ---------------------------------------------------------------- rows
 
 def linearisation_error(S, T, ndof, scale):

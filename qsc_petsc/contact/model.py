@@ -29,6 +29,11 @@ from .search import closest_faces
 # strain), then fades out (a band of 0.5 still left nodal two_pass unsettled on the sliding cubes, 0.1 and 0.02
 # settled alike)
 EDGE_BAND = 0.1
+# a search's point keeps the face it took at the pair's last search while that face lies within KEEP_TOL x its
+# size of the nearest (search.closest_faces' keep): on a kinked surface a point near the edge of two faces took
+# one at a search and the other at the next, and large sliding's searches went round that cycle without end
+# (Gauss rows on configs/sliding_cubes.toml dragged 0.2 m and pressed 5 %: 23 of 729 points swapped faces)
+KEEP_TOL = 1e-3
 
 @dataclass
 class Surface:
@@ -139,27 +144,36 @@ def _target_faces(mesh, T, X, U, points, radius):
     return gv, np.sort(orig, axis=1), fx, fu, fsize
 
 
-def _search_pass(mesh, T, X, U, radius, points):
-    """Points (a quadrature.gauss_points-like dict) projected on T's faces: a rows.Pass, the found mask and dict."""
+def _search_pass(mesh, T, X, U, radius, points, memo=None):
+    """Points (a quadrature.gauss_points-like dict) projected on T's faces: a rows.Pass, the found mask and dict.
+
+    memo (a dict, or None): the faces the same points took at the pass's last search, kept while within
+    KEEP_TOL x their size of the nearest (search.closest_faces' keep), and this search's, for the next."""
     gv, key, fx, fu, fsize = _target_faces(mesh, T, X, U, points["x_cur"], radius)
-    found = closest_faces(points["x_cur"], fx + fu, mesh.face_type, key, radius, EDGE_BAND * points["size"])
+    keep = memo.get("key") if memo is not None else None
+    if keep is not None and len(keep) != len(points["x_cur"]):
+        keep = None
+    found = closest_faces(points["x_cur"], fx + fu, mesh.face_type, key, radius, EDGE_BAND * points["size"],
+                          keep, KEEP_TOL * points["size"])
+    if memo is not None:
+        memo["key"] = found["key"]
     # the T material point each point faces, in the reference configuration (also ContactModel.report's slip)
     found["target_ref"] = quadrature.faced_points(found, fx)
     return quadrature.found_pass(points, found, gv, fx, fsize, found["target_ref"]), found["face"] >= 0, found
 
 
-def project_pass(mesh, S, T, X, U, radius):
+def project_pass(mesh, S, T, X, U, radius, memo=None):
     """Owned nodes of S projected on faces of T (local and gathered): a rows.Pass, the found mask, the search."""
     v = S.nodes
     points = {"x_cur": X[v] + U[v], "x_ref": X[v], "node": mesh.gvert[v], "weight": S.area, "size": S.size}
-    return _search_pass(mesh, T, X, U, radius, points)
+    return _search_pass(mesh, T, X, U, radius, points, memo)
 
 
-def gauss_pass(mesh, S, T, X, U, radius, n):
+def gauss_pass(mesh, S, T, X, U, radius, n, memo=None):
     """n x n Gauss points of this rank's S faces projected on faces of T: a rows.Pass."""
     f = S.faces
     points = quadrature.gauss_points(mesh.face_type, X[f], X[f] + U[f], mesh.gvert[f], n)
-    return _search_pass(mesh, T, X, U, radius, points)[0]
+    return _search_pass(mesh, T, X, U, radius, points, memo)[0]
 
 
 def segment_pass(mesh, S, T, X, U, radius, degree=4):
@@ -172,13 +186,14 @@ def segment_pass(mesh, S, T, X, U, radius, degree=4):
                                                              fx + fu, gv, fsize, radius, degree))
 
 
-def integration_pass(mesh, spec, S, T, X, U, radius):
-    """The pass "integrate S against T" with the pair's integration rule."""
+def integration_pass(mesh, spec, S, T, X, U, radius, memo=None):
+    """The pass "integrate S against T" with the pair's integration rule (memo: _search_pass's; segment
+    integration clips faces and has no faces to keep)."""
     if spec.integration == "gauss":
-        return gauss_pass(mesh, S, T, X, U, radius, spec.gauss_points)
+        return gauss_pass(mesh, S, T, X, U, radius, spec.gauss_points, memo)
     if spec.integration == "segment":
         return segment_pass(mesh, S, T, X, U, radius)
-    return project_pass(mesh, S, T, X, U, radius)[0]
+    return project_pass(mesh, S, T, X, U, radius, memo)[0]
 
 
 def contact_pairs_data(mesh, scene, template):
@@ -190,7 +205,8 @@ def contact_pairs_data(mesh, scene, template):
         E = min(scene.bodies[S.body].material.youngs_modulus, scene.bodies[M.body].material.youngs_modulus)
         h_eff = min(S.mean_size, M.mean_size)
         pairs.append({"index": i, "spec": pair, "slave": S, "master": M, "h_eff": h_eff,
-                      "eps_n": pair.penalty * E / h_eff, "radius": pair.search_distance * h_eff})
+                      "eps_n": pair.penalty * E / h_eff, "radius": pair.search_distance * h_eff,
+                      "memo": {"slave": {}, "master": {}, "master_nodes": {}}})     # faces kept (_search_pass)
     return pairs
 
 
@@ -396,10 +412,11 @@ class ContactModel:
         mesh, spec, X = self.mesh, pd["spec"], self.mesh.coords
         name = f"contact[{pd['index']}]"
         with self._phase("search"):
-            sp = integration_pass(mesh, spec, pd["slave"], pd["master"], X, U, pd["radius"])
+            memo = pd["memo"]
+            sp = integration_pass(mesh, spec, pd["slave"], pd["master"], X, U, pd["radius"], memo["slave"])
             mp = None
             if spec.formulation != "master_slave":
-                mp = integration_pass(mesh, spec, pd["master"], pd["slave"], X, U, pd["radius"])
+                mp = integration_pass(mesh, spec, pd["master"], pd["slave"], X, U, pd["radius"], memo["master"])
         points = self._check_found(pd, sp, mp)
         with self._phase("rows"):
             if spec.formulation == "master_slave":
@@ -410,7 +427,8 @@ class ContactModel:
                 weight = spec.weight.to_dict() if hasattr(spec.weight, "to_dict") else spec.weight
                 if spec.master_multiplier == "master_nodes" and spec.integration != "nodal":
                     with self._phase("search"):
-                        node_pass = project_pass(mesh, pd["master"], pd["slave"], X, U, pd["radius"])[0]
+                        node_pass = project_pass(mesh, pd["master"], pd["slave"], X, U, pd["radius"],
+                                                 memo["master_nodes"])[0]
                     rows = row_builders.quasi_symmetric_master_nodes(sp, mp, node_pass, weight,
                                                                      move=self._to_row_owners)
                 else:

@@ -96,7 +96,7 @@ def candidate_pairs(points, face_min, face_max, radius):
     return pair_point[srt].astype(np.int64), pair_face[srt].astype(np.int64)
 
 
-def closest_faces(points, face_xyz, face_type, face_key, radius, band=None):
+def closest_faces(points, face_xyz, face_type, face_key, radius, band=None, keep=None, keep_within=None):
     """The face each point projects on: the nearest within radius, ties broken by the smallest face_key row.
 
     points (p, 3); face_xyz (m, nv, 3); face_key (m, k) int64, e.g. each face's
@@ -119,6 +119,11 @@ def closest_faces(points, face_xyz, face_type, face_key, radius, band=None):
     the edge, whose tilt times d moved its gap between searches by far more than
     the penetrations (formulation.md section 6; large sliding did not settle).
     edge_factor is 1 for inside points and without band, 0 where no face.
+
+    keep (p, k) or None: each point's face key at an earlier search (a row of -1: none), and keep_within (p,)
+    [m]: a point whose kept face lies within that distance of the nearest takes it instead of the nearest, so
+    that the choice between the faces of a kink does not swing from one search to the next. out["key"]: the
+    keys of the faces chosen (-1 rows where none), for the next search's keep.
     """
     points = np.asarray(points, dtype=float).reshape(-1, 3)
     face_xyz = np.asarray(face_xyz, dtype=float)
@@ -133,7 +138,8 @@ def closest_faces(points, face_xyz, face_type, face_key, radius, band=None):
     p = len(points)
     out = {"face": np.full(p, -1, dtype=np.int64), "xi": np.zeros((p, 2)), "shape": np.zeros((p, nv)),
            "closest": np.full((p, 3), np.nan), "normal": np.zeros((p, 3)), "distance": np.full(p, np.inf),
-           "signed_gap": np.full(p, np.inf), "inside": np.zeros(p, dtype=bool), "edge_factor": np.zeros(p)}
+           "signed_gap": np.full(p, np.inf), "inside": np.zeros(p, dtype=bool), "edge_factor": np.zeros(p),
+           "key": np.full((p, face_key.shape[1]), -1, dtype=np.int64)}
     if p == 0 or len(face_xyz) == 0:
         return out
 
@@ -148,10 +154,16 @@ def closest_faces(points, face_xyz, face_type, face_key, radius, band=None):
 
     dmin = np.full(p, np.inf)
     np.minimum.at(dmin, pi, d)
-    tie = d <= dmin[pi] + TIE_TOL * fem.face_size(face_xyz[fi])
-    pi, fi, sel = pi[tie], fi[tie], sel[tie]
+    slack = TIE_TOL * fem.face_size(face_xyz[fi])
+    kept = np.zeros(len(pi), dtype=bool)
+    if keep is not None:
+        kept = np.all(face_key[fi] == np.asarray(keep, dtype=np.int64)[pi], axis=1)
+        slack = np.where(kept, np.maximum(slack, np.broadcast_to(keep_within, (p,))[pi]), slack)
+    tie = d <= dmin[pi] + slack
+    pi, fi, sel, kept = pi[tie], fi[tie], sel[tie], kept[tie]
     keys = face_key[fi]
-    order = np.lexsort(tuple(keys[:, j] for j in range(keys.shape[1] - 1, -1, -1)) + (pi,))
+    # the kept face first, then the tie rule
+    order = np.lexsort(tuple(keys[:, j] for j in range(keys.shape[1] - 1, -1, -1)) + (~kept, pi))
     first = order[np.r_[True, pi[order][1:] != pi[order][:-1]]]
     who, win, s = pi[first], fi[first], sel[first]
 
@@ -178,4 +190,5 @@ def closest_faces(points, face_xyz, face_type, face_key, radius, band=None):
         factor = (b - beside) / ((1.0 - EDGE_FULL) * b)
         out["edge_factor"][off] = np.clip(factor, 0.0, 1.0)
         out["face"][off[factor <= 0.0]] = -1
+    out["key"] = np.where((out["face"] >= 0)[:, None], face_key[np.maximum(out["face"], 0)], -1)
     return out
