@@ -529,7 +529,7 @@ CONTACT = Table({
                              "sliding, whose searches settle by it).", ge=0, default=1e-3),
     "max_searches": Int("Large sliding: most searches per increment, its start's included; an increment whose rows "
                         "have not settled by then is cut in half (slides of configs/sliding_cubes.toml measured in "
-                        "session 25 settled in 6-11 searches with segment rows, 7-17 with nodal and 7-20 with Gauss "
+                        "session 26 settled in 6-11 searches with segment rows, 7-19 with nodal and 5-14 with Gauss "
                         "rows).", ge=2,
                         default=20),
 })
