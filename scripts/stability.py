@@ -217,7 +217,8 @@ def relative_difference(a, b):
 # ---------------------------------------------------------------- the cases
 
 ALPHAS = ("1e0", "1e2", "1e4", "1e6", "1e8", "1e10")
-RATIO_PAIRS = [(1, 1), (1, 2), (1, 4), (1, 8), (1, 16), (2, 1), (4, 1), (8, 1), (16, 1)]
+# nested pairs (one mesh refines the other) and non-nested ones (nodes of one fall anywhere on the other's faces)
+RATIO_PAIRS = [(1, 1), (1, 2), (1, 4), (1, 8), (1, 16), (2, 1), (4, 1), (8, 1), (16, 1), (2, 19), (19, 2), (3, 29), (29, 3)]
 RATIO_RULES = {
     "master_slave": ["contact.0.formulation=master_slave"],
     "two_pass": ["contact.0.formulation=two_pass"],
