@@ -217,8 +217,10 @@ def relative_difference(a, b):
 # ---------------------------------------------------------------- the cases
 
 ALPHAS = ("1e0", "1e2", "1e4", "1e6", "1e8", "1e10")
-# nested pairs (one mesh refines the other) and non-nested ones (nodes of one fall anywhere on the other's faces)
-RATIO_PAIRS = [(1, 1), (1, 2), (1, 4), (1, 8), (1, 16), (2, 1), (4, 1), (8, 1), (16, 1), (2, 19), (19, 2), (3, 29), (29, 3)]
+# nested pairs (one mesh refines the other) and non-nested ones about 10x apart (nodes of one fall anywhere on the
+# other's faces: the nodal rules' error is 1e-3, not the nested pairs' 1e-5)
+RATIO_PAIRS = [(1, 1), (1, 2), (1, 4), (1, 8), (1, 16), (2, 1), (4, 1), (8, 1), (16, 1)]
+NON_NESTED_PAIRS = [(2, 19), (19, 2), (3, 29), (29, 3)]
 RATIO_RULES = {
     "master_slave": ["contact.0.formulation=master_slave"],
     "two_pass": ["contact.0.formulation=two_pass"],
@@ -390,7 +392,7 @@ def table_alpha(args):
 
 def table_ratio(args):
     rows = []
-    for lower, upper in RATIO_PAIRS:
+    for lower, upper in RATIO_PAIRS + NON_NESTED_PAIRS:
         for rule, sets in RATIO_RULES.items():
             r = measure(scene(sets=cells(lower, upper) + sets))
             pair = r["pair"]
