@@ -1,6 +1,7 @@
 """The qsc command: run, check and --version; PETSc options pass through to the options database."""
 
 import argparse
+import contextlib
 import os
 import signal
 import sys
@@ -76,18 +77,36 @@ def _interrupt(signum, frame):
     raise KeyboardInterrupt
 
 
+def _end_interrupted():
+    """Leave at once with 130 (interrupted while MPI and PETSc started): in parallel MPI_Abort ends every rank, for
+    the others may wait for this one; no finalizers run (petsc4py's and MPI's are collective)."""
+    sys.stdout.flush()
+    sys.stderr.write("qsc: interrupted\n")
+    sys.stderr.flush()
+    with contextlib.suppress(Exception):      # half-started MPI: the exit below ends this process all the same
+        from mpi4py import MPI
+        if MPI.Is_initialized() and not MPI.Is_finalized() and MPI.COMM_WORLD.size > 1:
+            MPI.COMM_WORLD.Abort(130)
+    os._exit(130)
+
+
 def main(argv=None):
     argv = sys.argv[1:] if argv is None else argv
     if argv[:1] == ["sweep"]:          # runs are subprocesses: the sweep itself never starts PETSc or MPI
         from .sweep import main as sweep_main
         return sweep_main(argv[1:])
-    # SIGTERM (mpirun ending its ranks on Ctrl-C, a batch system's kill) stops a run as Ctrl-C does
-    signal.signal(signal.SIGTERM, _interrupt)
     own, petsc_args = split_petsc_args(argv)
     args = build_parser().parse_args(own)
-    init_petsc(petsc_args)
-    from mpi4py import MPI
+    try:
+        init_petsc(petsc_args)
+        from mpi4py import MPI
+    except KeyboardInterrupt:          # Ctrl-C while MPI and PETSc start: no clean-up, which may be collective
+        _end_interrupted()
     comm = MPI.COMM_WORLD
+    # SIGTERM (mpirun ending its ranks on Ctrl-C, a batch system's kill) stops a run as Ctrl-C does, once MPI is up:
+    # before, it ends the process at once (mpirun then ends the others); a handler there raised in one rank while
+    # the others waited for it in a collective call, and its exit's clean-up waited too, for ever
+    signal.signal(signal.SIGTERM, _interrupt)
     say = print if comm.rank == 0 else (lambda *a, **k: None)
     if args.version:
         say(versions())

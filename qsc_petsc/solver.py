@@ -1074,8 +1074,10 @@ def solve_load_step(system, step, t_prev, t_target, u, update_terms, max_cutback
                 what = stats["out_of_reach"]
                 why = (f"; {what} out of the die's reach at the increment's start went through it "
                        f"(raise die[i].search_distance, or use more load steps)" if what.startswith("die") else
-                       f"; {what} out of the pair's reach at the increment's start (no row) penetrate the other "
-                       f"surface (raise contact[i].search_distance, use more load steps, or sliding = \"large\")")
+                       f"; {what} without a row at the increment's start (farther than contact[i].search_distance "
+                       f"from the other surface, or beside its edge) penetrate it: use more load steps or sliding = "
+                       f"\"large\" (whose searches follow the nodes), or raise search_distance if they came from "
+                       f"above the surface")
             if stats["snes_reason"] == "SEARCH_NOT_SETTLED":
                 why = (f"; the rows of the large-sliding pairs had not settled after {max_searches} searches "
                        f"(contact[i].max_searches; more load steps slide less per increment)")

@@ -543,8 +543,13 @@ def sweep(plan, say=print, reference=None):
             raise ValueError(f"the reused reference ran {shlex.join(reference.get('command', []))}; this "
                              f"sweep's reference would run {shlex.join(expected)}")
     plan.out.mkdir(parents=True, exist_ok=True)
-    for name in TABLES:            # an earlier sweep's tables are not this one's (until its reference is done)
+    # an earlier sweep's tables and runs are not this one's: its run_NNN folders beyond this sweep's count stayed
+    # beside a sweep.csv that did not list them (a helper's test pass, session 26)
+    for name in TABLES:
         (plan.out / name).unlink(missing_ok=True)
+    for folder in plan.out.glob("run_[0-9][0-9][0-9]"):
+        if folder.is_dir():
+            shutil.rmtree(folder)
     command = "qsc sweep " + shlex.join(plan.argv)
     combos = plan.combinations()
     n = len(combos) + 1

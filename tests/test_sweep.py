@@ -166,9 +166,14 @@ def test_a_second_sweep_reuses_the_reference_run(tmp_path, capsys, mpi_env):
     from qsc_petsc.sweep import make_plan, sweep
     common = [SCENE, *TINY, "--reference", "contact.0.penalty=1e6"]
     first = sweep(make_plan([*common, "--vary", "contact.0.penalty=1e2", "--out", str(tmp_path / "a")]))
+    stale = tmp_path / "b" / "run_002"          # an earlier, longer sweep's run (a helper's test pass, session 26)
+    stale.mkdir(parents=True)
+    (stale / "summary.json").write_text('{"status": "ok"}')
+    (tmp_path / "b" / "notes.txt").write_text("the user's")
     second = sweep(make_plan([*common, "--vary", "contact.0.penalty=1e4", "--out", str(tmp_path / "b")]),
                    reference=first[0])
     assert not (tmp_path / "b" / "reference").exists()
+    assert not stale.exists() and (tmp_path / "b" / "notes.txt").is_file()
     assert second[0]["folder"] == first[0]["folder"] and second[1]["status"] == "ok"
     assert 0.0 < second[1]["errors"]["displacement_l2"] < first[1]["errors"]["displacement_l2"]
     rows = read_csv(tmp_path / "b" / "sweep.csv")
