@@ -547,8 +547,8 @@ def sweep(plan, say=print, reference=None):
     # beside a sweep.csv that did not list them (a helper's test pass, session 26)
     for name in TABLES:
         (plan.out / name).unlink(missing_ok=True)
-    for folder in plan.out.glob("run_[0-9][0-9][0-9]"):
-        if folder.is_dir():
+    for folder in plan.out.glob("run_*"):
+        if folder.is_dir() and folder.name[4:].isdigit():      # run_001 ... run_999, run_1000 ...
             shutil.rmtree(folder)
     command = "qsc sweep " + shlex.join(plan.argv)
     combos = plan.combinations()

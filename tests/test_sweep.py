@@ -166,7 +166,7 @@ def test_a_second_sweep_reuses_the_reference_run(tmp_path, capsys, mpi_env):
     from qsc_petsc.sweep import make_plan, sweep
     common = [SCENE, *TINY, "--reference", "contact.0.penalty=1e6"]
     first = sweep(make_plan([*common, "--vary", "contact.0.penalty=1e2", "--out", str(tmp_path / "a")]))
-    stale = tmp_path / "b" / "run_002"          # an earlier, longer sweep's run (a helper's test pass, session 26)
+    stale = tmp_path / "b" / "run_1000"         # an earlier, longer sweep's run (a helper's test pass, session 26)
     stale.mkdir(parents=True)
     (stale / "summary.json").write_text('{"status": "ok"}')
     (tmp_path / "b" / "notes.txt").write_text("the user's")
