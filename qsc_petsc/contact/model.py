@@ -168,10 +168,13 @@ def _search_pass(mesh, T, X, U, radius, points, memo=None):
     return quadrature.found_pass(points, found, gv, fx, fsize, found["target_ref"]), found["face"] >= 0, found
 
 
-def project_pass(mesh, S, T, X, U, radius, memo=None):
-    """Owned nodes of S projected on faces of T (local and gathered): a rows.Pass, the found mask, the search."""
-    v = S.nodes
-    points = {"x_cur": X[v] + U[v], "x_ref": X[v], "node": mesh.gvert[v], "weight": S.area, "size": S.size}
+def project_pass(mesh, S, T, X, U, radius, memo=None, which=None):
+    """Owned nodes of S (those of the mask `which`, if given) projected on faces of T (local and gathered): a
+    rows.Pass, the found mask, the search."""
+    which = slice(None) if which is None else which
+    v = S.nodes[which]
+    points = {"x_cur": X[v] + U[v], "x_ref": X[v], "node": mesh.gvert[v], "weight": S.area[which],
+              "size": S.size[which]}
     return _search_pass(mesh, T, X, U, radius, points, memo)
 
 
@@ -364,10 +367,7 @@ class ContactModel:
                 held = W[_owned_rows(mesh, S.nodes)] > 0
                 if not self.comm.allreduce(bool(held.any()), op=MPI.LOR):
                     continue                 # a side without rows (master_slave's master)
-                v = S.nodes[~held]
-                points = {"x_cur": X[v] + U[v], "x_ref": X[v], "node": mesh.gvert[v], "weight": S.area[~held],
-                          "size": S.size[~held]}
-                found = _search_pass(mesh, T, X, U, pd["radius"], points)[2]
+                found = project_pass(mesh, S, T, X, U, pd["radius"], which=~held)[2]
                 tol = self.scene.solver.active_set_tolerance * pd["h_eff"]
                 count += int(((found["edge_factor"] == 1.0) & (-found["signed_gap"] > tol)).sum())
             count = self.comm.allreduce(count, op=MPI.SUM)
