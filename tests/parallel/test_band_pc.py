@@ -368,3 +368,18 @@ def test_band_gets_more_mumps_workspace_when_its_estimate_falls_short(comm, mpi_
     if comm.size == 2:            # Debian's MUMPS 5.5.1 on this partition (3 ranks factor it at once)
         assert relaxed == {"qsc_band_mat_mumps_icntl_14"}
     assert not PETSc.Options().hasName("qsc_band_mat_mumps_icntl_14")
+
+
+def test_a_band_factorization_that_fails_is_named(comm, mpi_tmp):
+    """A band whose MUMPS factorization fails for good (here a 1 MB memory cap, INFOG(1) = -19) returned inf
+    from its solve: KSP DIVERGED_NANORINF at every cutback named nothing. It is now a ConvergenceError naming
+    MUMPS's INFOG codes and the band's options, at once (a smaller increment has the same band)."""
+    from qsc_petsc.errors import ConvergenceError
+    from qsc_petsc.run import Run
+    from qsc_petsc.scene import load_scene
+    scene = load_scene(scene_without_petsc(mpi_tmp), ["output.xdmf=false", "petsc.band_mat_mumps_icntl_23=1"])
+    run = Run(scene, comm, mpi_tmp / "out", log=lambda *a: None)
+    with pytest.raises(ConvergenceError, match=r"the contact band's MUMPS factorization failed: INFOG\(1\) = -19, "
+                                               r".*cap ICNTL\(23\) = 1 MB.*-qsc_band_mat_mumps_\*"):
+        run.execute()
+    run.destroy()
