@@ -77,11 +77,12 @@ def _interrupt(signum, frame):
     raise KeyboardInterrupt
 
 
-def _end_interrupted():
-    """Leave at once with 130 (interrupted while MPI and PETSc started): in parallel MPI_Abort ends every rank, for
-    the others may wait for this one; no finalizers run (petsc4py's and MPI's are collective)."""
+def _end_interrupted(line="qsc: interrupted"):
+    """Leave at once with 130, saying `line`: in parallel MPI_Abort ends every rank, for the others may wait for
+    this one in a collective call, and so would this one's clean-up; no finalizers run (petsc4py's and MPI's are
+    collective). Also while MPI and PETSc start."""
     sys.stdout.flush()
-    sys.stderr.write("qsc: interrupted\n")
+    sys.stderr.write(line + "\n")
     sys.stderr.flush()
     with contextlib.suppress(Exception):      # half-started MPI: the exit below ends this process all the same
         from mpi4py import MPI
@@ -144,12 +145,8 @@ def main(argv=None):
             say("qsc: interrupted")
             return 130
         # in parallel the signal may have reached this rank alone (a kill of one process, or every rank at a
-        # different point): the others wait in a collective call, and so would this one's clean-up (PETSc's
-        # destructors, MPI's finalize), for ever. The finished steps are on disk: end the job.
-        sys.stderr.write(f"qsc: interrupted (rank {comm.rank}); ending the job\n")
-        sys.stderr.flush()
-        sys.stdout.flush()
-        comm.Abort(130)
+        # different point). The finished steps are on disk: end the job.
+        _end_interrupted(f"qsc: interrupted (rank {comm.rank}); ending the job")
     except Exception:  # noqa: BLE001 - a bug: print it and abort, never leave other ranks waiting
         sys.stderr.write(f"[rank {comm.rank}] internal error:\n{traceback.format_exc()}")
         sys.stderr.flush()

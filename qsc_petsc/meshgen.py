@@ -148,16 +148,27 @@ def cell_pieces(cells, n_points):
     return rank[piece], len(first)
 
 
-def boundary_faces(cell_type, cells):
-    """(cell, local face) rows (k, 2) of every face that belongs to one cell only."""
-    cells = np.asarray(cells, np.int64)
+def _face_counts(cell_type, cells):
+    """Every cell face, in (cell, local face) order flattened: its id (of its sorted node tuple) and how many
+    cells hold it."""
     table = fem.CELL_FACES[cell_type]
     faces = np.sort(cells[:, table].reshape(-1, table.shape[1]), axis=1)
     if len(faces) == 0:
-        return np.empty((0, 2), np.int64)
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
     ids = _row_ids(faces, cells.max() + 1)
-    once = np.flatnonzero(np.bincount(ids)[ids] == 1)
-    return np.column_stack([once // len(table), once % len(table)])
+    return ids, np.bincount(ids)[ids]
+
+
+def _faces_held(cell_type, count, n):
+    """(cell, local face) rows (k, 2) of the faces held by n cells (_face_counts' count)."""
+    k = np.flatnonzero(count == n)
+    per_cell = len(fem.CELL_FACES[cell_type])
+    return np.column_stack([k // per_cell, k % per_cell]).astype(np.int64)
+
+
+def boundary_faces(cell_type, cells):
+    """(cell, local face) rows (k, 2) of every face that belongs to one cell only."""
+    return _faces_held(cell_type, _face_counts(cell_type, np.asarray(cells, np.int64))[1], 1)
 
 
 def _orient(cell_type, points, cells):
@@ -239,20 +250,20 @@ def read_mesh_file(path, scale=1.0):
                          f"more than once (msh2 writes an element once per physical volume): each is used once\n")
         index = np.sort(first)
         cells = cells[index]
+    cells = _orient(cell_type, points, cells)
+    ids, count = _face_counts(cell_type, cells)
     # a face of three cells or more: cells that overlap (an extra cell over others: 2 % off, exit 0, a helper's
     # test pass, session 26); a valid mesh has each face in one cell (boundary) or two
-    table = fem.CELL_FACES[cell_type]
-    ids = _row_ids(np.sort(cells[:, table].reshape(-1, table.shape[1]), axis=1), len(points))
-    crowded = np.flatnonzero(np.bincount(ids)[ids] > 2)
+    crowded = np.flatnonzero(count > 2)
     if len(crowded):
+        table = fem.CELL_FACES[cell_type]
         face = crowded[ids[crowded] == ids[crowded[0]]]
+        nodes = cells[face[0] // len(table)][table[face[0] % len(table)]]
         raise MeshError(f"mesh file {path}: {len(np.unique(ids[crowded]))} face(s) belong to more than two "
                         f"{mtype} cells (the cells overlap), e.g. {mtype} cells "
                         f"{', '.join(str(i) for i in index[face // len(table)])} (0-based, in the file's order) "
-                        f"share the face of points {sorted(int(v) for v in cells[face[0] // len(table)][table[face[0] % len(table)]])}")
-    cells = _orient(cell_type, points, cells)
-
-    boundary = boundary_faces(cell_type, cells)
+                        f"share the face of points {sorted(int(v) for v in nodes)}")
+    boundary = _faces_held(cell_type, count, 1)
     groups = _named_facets(mesh)
     if "boundary" in groups:
         raise MeshError(f"mesh file {path}: surface name 'boundary' is reserved for all boundary faces")

@@ -75,6 +75,13 @@ MUMPS_WORKSPACE_ERRORS = (-8, -9, -14, -15, -17, -20)
 MUMPS_MAX_RELAXATION = 1000    # percent
 
 
+def factored_by_mumps(pc):
+    """Whether pc is an LU or Cholesky factorization by MUMPS, named or PETSc's own choice (MUMPS on several
+    ranks, PETSc's own on one)."""
+    package = pc.getFactorSolverType() or ("mumps" if pc.getComm().getSize() > 1 else "petsc")
+    return pc.getType() in ("lu", "cholesky") and package == "mumps"
+
+
 def more_mumps_workspace(pc, prefix, own):
     """After pc's MUMPS factorization ran out of workspace (INFOG(1) in MUMPS_WORKSPACE_ERRORS): its memory
     relaxation ICNTL(14) doubled in the options database as -<prefix>mat_mumps_icntl_14 (read when a factor is

@@ -32,7 +32,14 @@ import numpy as np
 from petsc4py import PETSc
 
 from .errors import ConvergenceError
-from .options import insert_options, more_mumps_workspace, option_value, remove_options, set_from_options
+from .options import (
+    factored_by_mumps,
+    insert_options,
+    more_mumps_workspace,
+    option_value,
+    remove_options,
+    set_from_options,
+)
 
 AMG_TYPES = ("hypre", "gamg")        # the band's partner: the first is the default
 # BoomerAMG: cheaper V-cycles than hypre's defaults (about half the operator complexity, measured) at the
@@ -241,14 +248,15 @@ class BandSolve:
         # MUMPS's workspace estimate can fall short on several ranks (configs/stiff_plate.toml with Gauss rows,
         # 2 ranks: INFOG(1) = -9 from the AMF ordering's factors, and the band's solve gave inf): relaxed and
         # factored again, as System does for its own factors
-        mumps = pc.getType() in ("lu", "cholesky") and pc.getFactorSolverType() == "mumps"
-        while mumps and more_mumps_workspace(pc, "qsc_band_", self.own_options) is not None:
+        if not factored_by_mumps(pc):
+            return
+        while more_mumps_workspace(pc, "qsc_band_", self.own_options) is not None:
             self.ksp.setOperators(self.sub)
             self.ksp.setUp()
-        if mumps and pc.getFactorMatrix().getMumpsInfog(1) < 0:
+        F = pc.getFactorMatrix()
+        if F.getMumpsInfog(1) < 0:
             # its solve would return inf or NaN, which the Krylov method reported as DIVERGED_NANORINF at every
             # cutback; a smaller increment has the same band (collective: INFOG is global)
-            F = pc.getFactorMatrix()
             raise ConvergenceError(
                 f"the contact band's MUMPS factorization failed: INFOG(1) = {F.getMumpsInfog(1)}, INFOG(2) = "
                 f"{F.getMumpsInfog(2)} (MUMPS's manual names them; memory relaxation ICNTL(14) = "

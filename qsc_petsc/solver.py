@@ -375,11 +375,8 @@ class System:
                 f"{MUMPS_MEMORY_SHARE:.0%} of a rank's share of its node's available memory")
 
     def _factors_with_mumps(self):
-        """Whether the solver's PC is an LU or Cholesky factorization by MUMPS, named or PETSc's own choice (MUMPS on
-        several ranks, PETSc's own on one)."""
-        pc = self.snes.getKSP().getPC()
-        package = pc.getFactorSolverType() or ("mumps" if self.comm.size > 1 else "petsc")
-        return pc.getType() in ("lu", "cholesky") and package == "mumps"
+        """Whether the solver's PC is a MUMPS factorization (options.factored_by_mumps)."""
+        return options.factored_by_mumps(self.snes.getKSP().getPC())
 
     @contextmanager
     def _mumps_options(self):
