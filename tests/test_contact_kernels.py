@@ -371,6 +371,33 @@ def test_a_point_keeps_its_face_at_a_kink_within_the_keep_distance():
     np.testing.assert_array_equal(far["key"], np.full((2, 4), -1))
 
 
+def test_a_point_as_near_to_two_faces_is_shared_between_them():
+    """A valley of two faces meeting at x = 0.5 (slopes -+0.01) and a point under its bottom line: as near to
+    both, each face takes half of its weight with its own projection and normal, so that its pair of rows
+    pushes nothing sideways. The tie rule alone gave it whole to the face of smaller key, whose normal leaned
+    it toward that face (Gauss rows, whose points fall on the other surface's edges, left configs/flat_punch.toml
+    1.1e-5 of its normal force sideways). A shared point keeps no face for the next search; a point nearer to
+    one face goes to it whole."""
+    xyz = np.array([[0.0, 0, 0.005], [0.5, 0, 0], [0.5, 1, 0], [0.0, 1, 0.005], [1.0, 0, 0.005], [1.0, 1, 0.005]])
+    faces = np.array([[0, 1, 2, 3], [1, 4, 5, 2]])
+    key = np.sort(faces, axis=1)
+    pts = np.array([[0.5, 0.3, -1e-3], [0.45, 0.5, -1e-3]])
+    out = closest_faces(pts, xyz[faces], "quad", key, 0.2)
+    np.testing.assert_array_equal(out["face"], [0, 0])          # the winner: the smaller key
+    np.testing.assert_array_equal(out["share"], [2.0, 1.0])
+    np.testing.assert_array_equal(out["extra"]["point"], [0])
+    np.testing.assert_array_equal(out["extra"]["face"], [1])
+    np.testing.assert_allclose(out["extra"]["signed_gap"], out["signed_gap"][:1], rtol=1e-12)
+    assert out["normal"][0, 0] == pytest.approx(-out["extra"]["normal"][0, 0], rel=1e-12) != 0.0
+    np.testing.assert_array_equal(out["key"], [[-1] * 4, key[0]])
+    pss = Pass.from_search(np.array([10, 11]), np.ones(2), np.full(2, 0.5), out, faces, np.full(2, 0.5))
+    np.testing.assert_array_equal(pss.node, [10, 11, 10])
+    np.testing.assert_allclose(pss.area, [0.5, 1.0, 0.5])
+    shared = pss.node == 10
+    sideways = (pss.area[shared, None] * pss.delta0[shared, None] * pss.normal[shared]).sum(axis=0)
+    assert abs(sideways[0]) < 1e-15 and abs(sideways[2]) > 1e-4
+
+
 # ---------------------------------------------------------------- rows
 
 def linearisation_error(S, T, ndof, scale):
@@ -438,7 +465,8 @@ def test_sum_phi_W_is_the_contact_area(slave_type, master_type):
     for nA, nB in [(3, 4), (4, 3), (2, 7)]:
         A, B, _ = pair(nA, slave_type, nB, master_type, zfun=flat)
         sp, mp = make_pass(A, B), make_pass(B, A)
-        assert len(sp.node) == len(A.ids) and len(mp.node) == len(B.ids)
+        # every node found a face (a node on an edge of the other mesh is shared by its faces: more entries)
+        assert set(sp.node) == set(A.ids) and set(mp.node) == set(B.ids)
         for name, build in FORMULATIONS.items():
             rows = build(sp, mp)
             assert rows.phi * rows.W_vals.sum() == pytest.approx(1.0, rel=1e-13), name

@@ -1,5 +1,5 @@
 """Model only what a scene requires (issue 5, part 4): the quarter two-cube model with symmetry planes gives the
-full model's reactions, and `qsc check` says what each will model."""
+full model's reactions, and `qsc check` says what each will model; a mirror-symmetric scene keeps its symmetry."""
 
 import pytest
 from conftest import CONFIGS, run_scene
@@ -64,3 +64,18 @@ def test_die_contact_area_is_the_pressed_face(comm, mpi_tmp, name, cells, condit
     contact = summary["steps"][-1]["contact"]
     for die in ("die[0] bottom", "die[1] top"):
         assert contact[die]["contact_area"] == pytest.approx(area, rel=1e-12)
+
+
+@pytest.mark.parametrize("integration", ["gauss", "nodal"])
+def test_a_centred_punch_is_not_pushed_sideways(tmp_path, integration):
+    """configs/flat_punch.toml is mirror-symmetric about x = 0.5 and y = 0.5: its contact force shall have no
+    sideways part beyond round-off. The punch's Gauss points on its central lines lie on the block's edges,
+    where the tie rule had given each to one face and its normal: Fx = Fy = 9.0e-5 of the normal force (Gauss,
+    master_slave, these meshes); now shared between the faces (search.closest_faces)."""
+    sets = ["bodies.0.mesh.cells=[8,8,4]", "bodies.1.mesh.cells=[5,5,5]", "output.xdmf=false",
+            "contact.0.formulation=master_slave", f"contact.0.integration={integration}"]
+    run, summary = run_scene(CONFIGS / "flat_punch.toml", tmp_path / "out", sets)
+    run.destroy()
+    assert summary["status"] == "ok"
+    force = next(iter(summary["steps"][-1]["contact"].values()))["force_on_slave"]
+    assert abs(force[0]) < 1e-12 * force[2] and abs(force[1]) < 1e-12 * force[2]

@@ -52,20 +52,26 @@ def found_pass(points, found, t_gids, t_xref, t_size, faced=None):
     """The Pass of the points that found a T face; found is search.closest_faces' dict for points["x_cur"].
 
     points: dict with x_ref, weight, size, node and optionally source_nodes, source_shape
-    (nodal quadrature when absent); a point's weight is scaled by its edge_factor (search.closest_faces).
+    (nodal quadrature when absent); a point's weight is scaled by its edge_factor (search.closest_faces) and
+    shared among the faces at the same distance (found["share"], found["extra"]: one entry each).
     t_gids (k, nv), t_xref (k, nv, 3), t_size (k,): the T faces given to the search; faced:
     faced_points(found, t_xref) when the caller has it already.
     """
-    ok = found["face"] >= 0
-    f = found["face"][ok]
-    N = found["shape"][ok]
+    ok = np.flatnonzero(found["face"] >= 0)
     x_target = (faced_points(found, t_xref) if faced is None else faced)[ok]
-    delta0 = np.einsum("pi,pi->p", points["x_ref"][ok] - x_target, found["normal"][ok])
+    extra = found["extra"]
+    q = np.concatenate([ok, extra["point"]])
+    f = np.concatenate([found["face"][ok], extra["face"]])
+    N = np.concatenate([found["shape"][ok], extra["shape"]])
+    normal = np.concatenate([found["normal"][ok], extra["normal"]])
+    x_target = np.concatenate([x_target, np.einsum("pv,pvi->pi", extra["shape"], t_xref[extra["face"]])])
+    factor = np.concatenate([found["edge_factor"][ok], extra["edge_factor"]]) / found["share"][q]
+    delta0 = np.einsum("pi,pi->p", points["x_ref"][q] - x_target, normal)
     src = points.get("source_nodes")
-    return Pass(node=points["node"][ok], area=points["weight"][ok] * found["edge_factor"][ok],
-                size=points["size"][ok], target_nodes=np.asarray(t_gids)[f], shape=N, normal=found["normal"][ok], delta0=delta0,
-                target_size=np.asarray(t_size)[f], source_nodes=None if src is None else src[ok],
-                source_shape=None if src is None else points["source_shape"][ok])
+    return Pass(node=points["node"][q], area=points["weight"][q] * factor, size=points["size"][q],
+                target_nodes=np.asarray(t_gids)[f], shape=N, normal=normal, delta0=delta0,
+                target_size=np.asarray(t_size)[f], source_nodes=None if src is None else src[q],
+                source_shape=None if src is None else points["source_shape"][q])
 
 
 def segment_pass(face_type, xs_ref, xs_cur, s_gids, xt_ref, xt_cur, t_gids, t_size, radius, degree=4):

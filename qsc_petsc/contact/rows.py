@@ -124,15 +124,19 @@ class Pass:
         """The Pass of the points that found a face: found is search.closest_faces' dict for points `node`.
 
         face_nodes (m, nv) global vertex ids and face_size (m,) of the faces given to the search; a point's area
-        is scaled by its edge_factor.
+        is scaled by its edge_factor and shared among the faces at the same distance (found["extra"]).
         """
-        f = np.asarray(found["face"])
-        ok = f >= 0
-        fo = f[ok]
-        return Pass(node=np.asarray(node)[ok], area=np.asarray(area)[ok] * found["edge_factor"][ok],
-                    size=np.asarray(size)[ok], target_nodes=np.asarray(face_nodes)[fo], shape=found["shape"][ok],
-                    normal=found["normal"][ok], delta0=found["signed_gap"][ok],
-                    target_size=np.asarray(face_size)[fo])
+        ok = np.flatnonzero(np.asarray(found["face"]) >= 0)
+        extra = found["extra"]
+        q = np.concatenate([ok, extra["point"]])
+        fo = np.concatenate([found["face"][ok], extra["face"]])
+
+        def both(name):
+            return np.concatenate([found[name][ok], extra[name]])
+
+        return Pass(node=np.asarray(node)[q], area=np.asarray(area)[q] * both("edge_factor") / found["share"][q],
+                    size=np.asarray(size)[q], target_nodes=np.asarray(face_nodes)[fo], shape=both("shape"),
+                    normal=both("normal"), delta0=both("signed_gap"), target_size=np.asarray(face_size)[fo])
 
 
 def _pass_entries(pss):
@@ -276,23 +280,31 @@ def project_master_rows(parts, node_pass):
     times N_a^k(xi_a^l), moved to row 3 k of every node k of the slave face master node l projects on.
 
     node_pass: the nodal pass of master nodes on the slave (master node l -> slave face, shape values):
-    the master multiplier interpolated from slave-node values (paper [8]-[10]). Rows of master nodes
-    without a projection here are dropped. Pure join on l; the caller puts R's rows on the rank that
-    holds l's projection.
+    the master multiplier interpolated from slave-node values (paper [8]-[10]). A master node shared by
+    several slave faces (search.closest_faces: as near to each) has an entry for each, and each takes its
+    share of the node's area. Rows of master nodes without a projection here are dropped. Pure join on l; the
+    caller puts R's rows on the rank that holds l's projection.
     """
     G_r, G_c, G_v, g_r, g_v, W_r, W_v = parts
     order = np.argsort(node_pass.node, kind="stable")
     known = node_pass.node[order]
+    # each entry's part of its node: 1 unless shared
+    _, first, inverse = np.unique(known, return_index=True, return_inverse=True)
+    total = np.add.reduceat(node_pass.area[order], first) if len(known) else np.zeros(0)
+    part = np.empty(len(known))
+    part[order] = np.divide(node_pass.area[order], total[inverse], out=np.ones(len(known)),
+                            where=total[inverse] > 0)
 
     def spread(rows):
         """For every entry of row 3 l: the new rows 3 k, the entry it comes from and its factor N^k."""
         l = np.asarray(rows, dtype=_I) // 3
-        i = np.minimum(np.searchsorted(known, l), max(len(known) - 1, 0))
-        hit = (known[i] == l) if len(known) else np.zeros(len(l), dtype=bool)
-        pos = order[i[hit]]
-        N = node_pass.shape[pos]                                   # (h, nv)
+        lo, hi = np.searchsorted(known, l, "left"), np.searchsorted(known, l, "right")
+        count = hi - lo
+        src = np.repeat(np.arange(len(l)), count)
+        pos = order[np.repeat(lo, count) + np.arange(len(src)) - np.repeat(np.cumsum(count) - count, count)]
+        N = node_pass.shape[pos] * part[pos][:, None]               # (h, nv)
         e, kk = np.nonzero(N != 0.0)
-        return 3 * node_pass.target_nodes[pos[e], kk], np.flatnonzero(hit)[e], N[e, kk]
+        return 3 * node_pass.target_nodes[pos[e], kk], src[e], N[e, kk]
 
     G_rows, src, f = spread(G_r)
     g_rows, g_src, g_f = spread(g_r)
