@@ -696,6 +696,18 @@ def _centred(comm, x):
     return x - comm.allreduce(x.sum(axis=0), op=MPI.SUM) / max(comm.allreduce(len(x)), 1)
 
 
+def dilatation(mesh, template):
+    """The displacement of a unit strain in every direction, u = x - (x's body centroid), on every body (a Vec
+    like template): K times it is the force scale of a unit strain (System's force floor)."""
+    vec = template.duplicate()
+    a = vec.getArray().reshape(-1, 3)
+    row_body = mesh.vertex_body[mesh.owned_rows]
+    for b in range(len(mesh.body_names)):
+        r = np.flatnonzero(row_body == b)
+        a[r] = _centred(mesh.comm, mesh.coords[mesh.owned_rows[r]])
+    return vec
+
+
 def rigid_body_modes(mesh, template, held=()):
     """Near-nullspace: the 6 rigid-body modes of every body, each supported on its own body only.
 

@@ -503,7 +503,8 @@ CONTACT = Table({
     "penalty": Float("Dimensionless alpha of the penalty eps_n = alpha * E_eff / h_eff (at most 1e10; tighter "
                      "contact: enforcement = \"augmented_lagrangian\").", gt=0, le=MAX_PENALTY, default=1e4),
     "enforcement": Choice(("penalty", "augmented_lagrangian"), "How the constraint is enforced.", default="penalty"),
-    "augmented_tolerance": Float("Relative change of the multipliers that ends the augmented Lagrangian loop.",
+    "augmented_tolerance": Float("Relative change of the multipliers that ends the augmented Lagrangian loop "
+                                 "(relative to the pressure of a strain of 1e-6 where the multipliers are smaller).",
                                  gt=0, default=1e-6),
     "augmented_max_iterations": Int("Most augmented Lagrangian updates per load step (one loop updates every "
                                     "augmented pair: the largest of their values holds).", ge=1, default=25),

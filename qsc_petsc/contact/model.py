@@ -17,7 +17,7 @@ from petsc4py import PETSc
 from .. import assembly, fem
 from ..errors import SceneError
 from ..mesh import on_all
-from ..solver import ConstraintTerm, array_digest
+from ..solver import FLOOR_STRAIN, ConstraintTerm, array_digest
 from . import quadrature
 from . import rows as row_builders
 from .penalty import gate_positions
@@ -446,6 +446,8 @@ class ContactModel:
                               alpha=spec.penalty)
             term.points = points
             term.augmented_tolerance = spec.augmented_tolerance
+            # the pressure of a strain of FLOOR_STRAIN: E_eff FLOOR_STRAIN, E_eff = eps_n h_eff / alpha
+            term.pressure_floor = FLOOR_STRAIN * pd["eps_n"] * pd["h_eff"] / spec.penalty
             change, reused = None, False
             if last is not None:
                 change = _gap_change(last, term, u)
