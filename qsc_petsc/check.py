@@ -13,7 +13,7 @@ def check(scene, comm):
     from .solver import check_solver_options
     inserted = options.insert_options(scene.petsc)      # as the run would: the scene's, then the command line's
     try:
-        options.check_tolerances()
+        options.check_options()
         check_solver_options(comm)
     finally:
         options.remove_options(inserted)

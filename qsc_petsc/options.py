@@ -130,13 +130,30 @@ def options_text(options, from_scene, settings=()):
     return "\n".join(lines) + "\n"
 
 
-def check_tolerances():
-    """A SceneError for a -qsc_*_rtol / _atol / _stol / _divtol or _max_it option whose number is negative or
-    infinite: PETSc takes a negative tolerance as its own default without a word, and the solve then failed
-    with a reason that did not name the option. A value that is no number is left to PETSc, whose message
-    names it (set_from_options)."""
+UNREAD_FAMILIES = ("ksp_", "pc_", "snes_")     # solver options that only a prefixed object of qsc's reads
+
+
+def unread_option(name):
+    """Why the option `name` (without its dash) would go unread, or None: a solver option without the qsc_
+    prefix, which none of qsc's solvers reads (-ksp_type preonly ran GMRES without a word; a sweep varying -pc_type
+    made identical rows)."""
+    if name.startswith(UNREAD_FAMILIES):
+        band = f"; the contact band's solve: -{PREFIX}band_{name}" if not name.startswith("snes_") else ""
+        return f"-{name}: qsc's solvers read their options under the {PREFIX} prefix (-{PREFIX}{name}{band}); " \
+               f"unprefixed, nothing reads it"
+    return None
+
+
+def check_options():
+    """A SceneError for a solver option without the qsc_ prefix (unread_option), or a -qsc_*_rtol / _atol /
+    _stol / _divtol or _max_it option whose number is negative or infinite: PETSc takes a negative tolerance as
+    its own default without a word, and the solve then failed with a reason that did not name the option. A
+    value that is no number is left to PETSc, whose message names it (set_from_options)."""
     from .errors import SceneError
     for name, value in options_in_effect().items():
+        unread = unread_option(name)
+        if unread is not None:
+            raise SceneError(unread)
         kind = re.search(r"_(rtol|atol|stol|divtol|max_it)$", name) if name.startswith(PREFIX) else None
         if kind is None:
             continue

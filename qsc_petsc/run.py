@@ -155,7 +155,7 @@ class Run:
 
     def _build(self, scene, comm):
         """Mesh, contact model and its first search, operators, solver and output writer, in that order."""
-        options.check_tolerances()
+        options.check_options()
         with self.phases("mesh"):
             self.mesh = distribute_mesh(scene, comm)
         mesh = self.mesh

@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from .errors import QscError, SceneError
+from .options import split_petsc_args, unread_option
 
 EXIT_OK, EXIT_INPUT, EXIT_REFERENCE, EXIT_INTERRUPTED = 0, 2, 3, 130
 PHASES = ("mesh", "assembly", "search", "rows", "solve", "output")     # run.py's phases, in run order
@@ -87,6 +88,8 @@ def parse_variation(text, flag, ranks_key, single=False):
     if key.startswith("-"):
         if not PETSC_KEY.fullmatch(key):
             raise SweepInputError(f"{flag} {text!r}: {key!r} is not a PETSc option name (e.g. -qsc_pc_type)")
+        if unread_option(key[1:]) is not None:
+            raise SweepInputError(f"{flag} {text!r}: {unread_option(key[1:])}")
         return Variation(key, values, "petsc", text)
     return Variation(key, values, "scene", text)
 
@@ -153,7 +156,6 @@ class Plan:
 
 def make_plan(argv):
     """Parse and validate the sweep's arguments; every combination's scene is loaded (no run yet)."""
-    from .options import split_petsc_args
     from .scene import load_scene
     own, petsc = split_petsc_args(_join_flag_values(list(argv)))
     args = build_parser().parse_args(own)
@@ -177,6 +179,9 @@ def make_plan(argv):
         if v.key not in seen:
             reference_only.append(v)
     petsc_names = {tok for tok in petsc if PETSC_KEY.fullmatch(tok)}
+    for name in sorted(petsc_names):
+        if unread_option(name[1:]) is not None:
+            raise SweepInputError(unread_option(name[1:]))
     set_keys = {s.partition("=")[0].strip() for s in args.set}
     for v in variations + reference_only:
         if v.kind == "petsc" and v.key in petsc_names:

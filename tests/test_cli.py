@@ -632,6 +632,19 @@ def test_bad_petsc_option_is_an_input_error(tmp_path, option):
     assert f"-{option[0].lstrip('-')}" in (tmp_path / "petsc_options.txt").read_text()
 
 
+@pytest.mark.parametrize("command, option", [("run", ["-ksp_type", "preonly"]), ("check", ["-snes_max_it", "3"]),
+                                             ("run", ["-pc_factor_mat_solver_type", "mumps"])])
+def test_an_unprefixed_solver_option_is_an_input_error(tmp_path, command, option):
+    """qsc's solvers read their options under the qsc_ prefix: an unprefixed -ksp_ / -pc_ / -snes_ option, which
+    nothing reads, shall exit 2 naming the prefixed one (-ksp_type preonly ran GMRES without a word)."""
+    out = ["--out", str(tmp_path)] if command == "run" else []
+    proc = subprocess.run([sys.executable, "-m", "qsc_petsc.cli", command, str(CONFIGS / "block_compression.toml"),
+                           *out, *option], capture_output=True, text=True, timeout=120, check=False)
+    assert proc.returncode == 2, proc.stdout + proc.stderr
+    assert f"qsc: error: {option[0]}: " in proc.stdout and f"-qsc_{option[0][1:]}" in proc.stdout, proc.stdout
+    assert "Traceback" not in proc.stderr + proc.stdout
+
+
 @pytest.mark.parametrize("option, holder", [
     (["-qsc_ksp_monitor", "true"], "a value the option does not support"),
     (["-qsc_snes_monitor", "ascii:/nonexistent/dir/x.txt"], "a file that cannot be opened"),

@@ -44,6 +44,9 @@ def test_values_split_outside_brackets():
     for bad in ("contact.0.penalty", "=1,2", "ranks=0,2", "contact.0.penalty=1e2,,1e4", "-qsc pc=1,2", "a=1,1"):
         with pytest.raises(SweepInputError):
             parse_variation(bad, "--vary", "ranks")
+    # an unprefixed solver option, which no run would read: its rows were identical (a helper's pass)
+    with pytest.raises(SweepInputError, match="-qsc_pc_type"):
+        parse_variation("-pc_type=lu,gamg", "--vary", "ranks")
 
 
 def test_pareto_marks_follow_the_later_runs():
