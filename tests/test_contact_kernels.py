@@ -287,6 +287,39 @@ def test_tie_rule_is_independent_of_face_order_and_subset(face_type):
             np.testing.assert_array_equal(got[k], ref[k][sub])
 
 
+
+@pytest.mark.parametrize("face_type", ["quad", "tri"])
+def test_a_wide_search_projects_only_the_faces_that_may_be_nearest(face_type, monkeypatch):
+    """Within a radius of many face sizes the search projects only the faces whose box lies within a point's
+    nearest vertex distance (plus the tie and keep margins), found by radii doubling from the faces' size; the
+    answer shall be that of projecting every face within the radius, bit for bit, for points on, over, under
+    and far from a warped surface, with ties, an edge band and kept faces (it projected all: search_distance
+    10, 11 M pairs, 40 s; now 0.3 s)."""
+    from qsc_petsc.contact import search
+    S = Surface(6, face_type, warp, 100, down=True)
+    key = np.sort(S.gfaces, axis=1)
+    xf = S.xyz[S.faces]
+    rng = np.random.default_rng(11)
+    pts = np.concatenate([tie_points(S), S.xyz + rng.uniform(-0.3, 0.3, S.xyz.shape) * [1, 1, 0.5],
+                          S.xyz[:5] + [0, 0, 0.9]])
+    band = np.full(len(pts), 0.05)
+    keep = key[rng.integers(0, len(key), len(pts))]
+    calls = []
+
+    def every_face(points, face_xyz, radius, margin):
+        calls.append(len(points))
+        return candidate_pairs(points, face_xyz.min(axis=1), face_xyz.max(axis=1), radius)
+
+    for kwargs in ({}, {"band": band}, {"keep": keep, "keep_within": np.full(len(pts), 0.02)}):
+        got = closest_faces(pts, xf, face_type, key, 1.0, **kwargs)
+        with monkeypatch.context() as m:
+            m.setattr(search, "_nearest_candidates", every_face)
+            ref = closest_faces(pts, xf, face_type, key, 1.0, **kwargs)
+        for k in ["face", "xi", "normal", "signed_gap", "edge_factor", "share", "key"]:
+            np.testing.assert_array_equal(got[k], ref[k], err_msg=k)
+        np.testing.assert_array_equal(got["extra"]["face"], ref["extra"]["face"])
+    assert calls and (got["face"] >= 0).all() and (got["share"] > 1).any()
+
 def test_tie_rule_on_a_kinked_ridge():
     """Over the ridge of a roof, the normal shall come from the face with the smallest key, whatever the order."""
     x = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [-1, 0, -1], [-1, 1, -1], [2, 0, -1], [2, 1, -1]],

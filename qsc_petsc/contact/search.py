@@ -96,6 +96,42 @@ def candidate_pairs(points, face_min, face_max, radius):
     return pair_point[srt].astype(np.int64), pair_face[srt].astype(np.int64)
 
 
+def _nearest_candidates(points, face_xyz, radius, margin):
+    """The (point, face) pairs that may hold a point's nearest face within radius, or one within margin (p,) of
+    it (ties, keep's faces): sorted by point, then face.
+
+    A point's distance to any vertex of a face bounds its distance to its nearest face from above, and its
+    distance to a face's box bounds that face's distance from below: only faces whose box lies within the
+    best vertex distance plus margin are kept for the projection. The boxes are searched within a radius
+    that starts at the faces' median size and doubles for the points it does not settle (its nearest vertex
+    plus margin beyond it), up to `radius`: a search_distance widened to reach a gap of many element sizes
+    projected every face within it (two plates, 28k points on 16k faces, search_distance 10: 11 M pairs,
+    40 s; hunt27_2)."""
+    lo, hi = face_xyz.min(axis=1), face_xyz.max(axis=1)
+    r = min(radius, float(np.median(hi - lo, axis=0).max()) or radius)
+    todo = np.arange(len(points))
+    found_p, found_f = [], []
+    while len(todo):
+        last = r >= radius
+        pi, fi = candidate_pairs(points[todo], lo, hi, r)
+        x = points[todo][pi]
+        box = np.sqrt(_dot(*(2 * [np.maximum(lo[fi] - x, 0.0) + np.maximum(x - hi[fi], 0.0)])))
+        vertex = np.full(len(pi), np.inf)
+        for v in range(face_xyz.shape[1]):
+            np.minimum(vertex, _dot(*(2 * [face_xyz[fi, v] - x])), out=vertex)
+        best = np.full(len(todo), np.inf)
+        np.minimum.at(best, pi, np.sqrt(vertex))
+        reach = best + margin[todo]
+        settled = last | (reach <= r)
+        take = settled[pi] & (box <= reach[pi] * (1.0 + 1e-12))
+        found_p.append(todo[pi[take]])
+        found_f.append(fi[take])
+        todo, r = todo[~settled], min(2.0 * r, radius)
+    pi, fi = np.concatenate(found_p), np.concatenate(found_f)
+    order = np.lexsort((fi, pi))
+    return pi[order], fi[order]
+
+
 def _entries(points, proj, pi, sel, band):
     """Per (point pi, projection sel): xi, shape, closest, normal, distance, signed_gap, inside and edge_factor
     (closest_faces' edge band: 0 where the point meets no face)."""
@@ -191,7 +227,9 @@ def closest_faces(points, face_xyz, face_type, face_key, radius, band=None, keep
     if p == 0 or len(face_xyz) == 0:
         return out
 
-    pi, fi = candidate_pairs(points, face_xyz.min(axis=1), face_xyz.max(axis=1), radius)
+    margin = TIE_TOL * float(fem.face_size(face_xyz).max()) + (0.0 if keep is None else
+                                                                np.broadcast_to(keep_within, (p,)))
+    pi, fi = _nearest_candidates(points, face_xyz, radius, np.broadcast_to(margin, (p,)))
     proj = project_on_faces(points[pi], face_xyz[fi], face_type)
     near = proj.distance <= radius
     pi, fi = pi[near], fi[near]
