@@ -97,8 +97,9 @@ def main():
                      f"{1e3 * mean['search_rows_s']:.1f} |")
     description = (f"serial, MUMPS, alpha = {args.alpha}; worst over the six non-matching pairs (4,5), (4,7), "
                    "(2,8), (8,2), (3,10), (5,16) and both slave choices, except 'matching' = the (4,4) pair; "
-                   "points = quadrature points projected (both passes), nonzeros of G, search + rows time per "
-                   "search in ms (means over the non-matching runs); every run: docs/integration_table.csv")
+                   "points = quadrature points projected (both passes; a point as near to several faces counts once "
+                   "a face), nonzeros of G, search + rows time per search in ms (means over the non-matching runs); "
+                   "every run: docs/integration_table.csv")
     write_table(docs / "verification.md", args.title, "integration_table.py", description,
                 ["option", "max \\|szz+p\\|/p", "rms", "max traction err", "swap diff", "matching", "Newton mean",
                  "Newton max", "points", "G nonzeros", "search+rows ms"], table)
