@@ -122,14 +122,16 @@ class Restraint:
             GR.destroy()
         return self.seen[term]
 
-    def loose(self, terms):
+    def loose(self, terms, floor=0.0):
         """The motions that only active rows carrying no force hold (their force at most LOOSE_SHARE of the
-        largest row force of all terms): {body name: [mode names]}, empty if the boundary conditions and the
-        rows that press hold every body (collective). Such a body sits where the Newton iterations left it:
-        any position along those motions that keeps its rows open is an equilibrium too."""
+        largest row force of all terms, or of `floor` (System.force_floor) if that is larger): {body name: [mode
+        names]}, empty if the boundary conditions and the rows that press hold every body (collective). Such a
+        body sits where the Newton iterations left it: any position along those motions that keeps its rows open
+        is an equilibrium too. Without the floor, when every force was round-off (a stack not loaded yet, 3e-15 N
+        at most) round-off rows counted as pressing and only some of the loose bodies were named."""
         forces = [np.abs(term.m.getArray()[term.rows]) for term in terms]
         largest = self.comm.allreduce(max((float(f.max(initial=0.0)) for f in forces), default=0.0), op=MPI.MAX)
-        pressing = [term.active & (f > LOOSE_SHARE * largest) for term, f in zip(terms, forces)]
+        pressing = [term.active & (f > LOOSE_SHARE * max(largest, floor)) for term, f in zip(terms, forces)]
         if self.comm.allreduce(all(np.array_equal(p, term.active) for p, term in zip(pressing, terms)), op=MPI.LAND):
             return {}                   # every active row carries force: the solve's own check holds
         return self.free(terms, True, pressing)
