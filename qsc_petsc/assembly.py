@@ -710,16 +710,19 @@ def _centred(comm, x):
     return x - comm.allreduce(x.sum(axis=0), op=MPI.SUM) / max(comm.allreduce(len(x)), 1)
 
 
-def dilatation(mesh, template):
-    """The displacement of a unit strain in every direction, u = x - (x's body centroid), on every body (a Vec
-    like template): K times it is the force scale of a unit strain (System's force floor)."""
-    vec = template.duplicate()
-    a = vec.getArray().reshape(-1, 3)
+def dilatations(mesh, template):
+    """Per body, the displacement of a unit strain in every direction on it, u = x - (its centroid), and 0
+    elsewhere (Vecs like template): K times one is the force scale of a unit strain of that body (System's force
+    floor)."""
     row_body = mesh.vertex_body[mesh.owned_rows]
+    out = []
     for b in range(len(mesh.body_names)):
+        vec = template.duplicate()
+        vec.set(0.0)
         r = np.flatnonzero(row_body == b)
-        a[r] = _centred(mesh.comm, mesh.coords[mesh.owned_rows[r]])
-    return vec
+        vec.getArray().reshape(-1, 3)[r] = _centred(mesh.comm, mesh.coords[mesh.owned_rows[r]])
+        out.append(vec)
+    return out
 
 
 def rigid_body_modes(mesh, template, held=()):

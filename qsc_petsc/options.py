@@ -5,6 +5,7 @@ import sys
 
 PREFIX = "qsc_"
 _AT_START_UP = set()    # option names in the database when PETSc started: command line, PETSC_OPTIONS, .petscrc
+_COMMAND_LINE = set()   # option names given on the command line
 
 
 def split_petsc_args(argv):
@@ -40,6 +41,7 @@ def init_petsc(petsc_args):
     """Initialise petsc4py with the given options (before any module imports PETSc)."""
     import petsc4py
     petsc4py.init([sys.argv[0]] + list(petsc_args))
+    _COMMAND_LINE.update(tok[1:] for tok in petsc_args if tok.startswith("-") and not _is_number(tok))
     from petsc4py import PETSc
     _AT_START_UP.update(PETSc.Options().getAll())
     return PETSc
@@ -145,13 +147,14 @@ def unread_option(name):
 
 
 def check_options():
-    """A SceneError for a solver option without the qsc_ prefix (unread_option), or a -qsc_*_rtol / _atol /
+    """A SceneError for a solver option without the qsc_ prefix on the command line (unread_option; one from
+    PETSC_OPTIONS or a .petscrc, perhaps kept for other programs, is left alone), or a -qsc_*_rtol / _atol /
     _stol / _divtol or _max_it option whose number is negative or infinite: PETSc takes a negative tolerance as
     its own default without a word, and the solve then failed with a reason that did not name the option. A
     value that is no number is left to PETSc, whose message names it (set_from_options)."""
     from .errors import SceneError
     for name, value in options_in_effect().items():
-        unread = unread_option(name)
+        unread = unread_option(name) if name in _COMMAND_LINE else None
         if unread is not None:
             raise SceneError(unread)
         kind = re.search(r"_(rtol|atol|stol|divtol|max_it)$", name) if name.startswith(PREFIX) else None

@@ -187,11 +187,12 @@ class Run:
             if soft is not None and scene.contact and preconditioner.amg_type() != "hypre":
                 raise SceneError(f"solver.contact_multigrid_alpha: softens the interface for BoomerAMG only, and "
                                  f"pc_type is {preconditioner.amg_type()!r}")
-            strain = assembly.dilatation(mesh, u)
+            strain = assembly.dilatations(mesh, u)
             self.system = System(K, self.f_ext, self.bc_dofs, bc_values, nullspace, comm,
                                  scene.solver.max_active_set_iterations, scene.solver.contact_preconditioner,
                                  scene.solver.contact_band_layers, slip, soft, stencil_digests, lifting, strain)
-            strain.destroy()
+            for vec in strain:
+                vec.destroy()
             self.n_constrained = comm.allreduce(len(self.bc_dofs), op=MPI.SUM)
             self.restraint = Restraint(mesh, self.bc_dofs, u)
             self.system.free_motions = lambda terms, active: describe(self.restraint.free(terms, active))

@@ -645,6 +645,15 @@ def test_an_unprefixed_solver_option_is_an_input_error(tmp_path, command, option
     assert "Traceback" not in proc.stderr + proc.stdout
 
 
+def test_an_unprefixed_option_from_the_environment_is_left_alone(tmp_path):
+    """PETSC_OPTIONS (or a .petscrc) may hold options for other programs: an unprefixed solver option there is not
+    an error, only on the command line (every run stopped with exit 2; hunt27_4)."""
+    env = dict(os.environ, PETSC_OPTIONS="-ksp_converged_reason")
+    proc = subprocess.run([sys.executable, "-m", "qsc_petsc.cli", "run", str(CONFIGS / "block_compression.toml"),
+                           "--out", str(tmp_path)], capture_output=True, text=True, timeout=120, check=False, env=env)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+
+
 @pytest.mark.parametrize("option, holder", [
     (["-qsc_ksp_monitor", "true"], "a value the option does not support"),
     (["-qsc_snes_monitor", "ascii:/nonexistent/dir/x.txt"], "a file that cannot be opened"),
