@@ -301,7 +301,6 @@ class System:
         # sat at a residual of 6.5e-14 N for 60 Newton iterations against a target of ~1e-24 and failed. The
         # softest, not all: a cube of E = 1e3 pressed 1 % on one of 1e12 was solved to 2.5e-7 in force under a
         # floor from both (hunt27_4)
-        self.force_floor = 0.0
         forces = K.createVecLeft()
         scales = []
         for field in strain_fields or ():
