@@ -124,7 +124,8 @@ def build_parser():
     p.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE",
                    help="a scene override for every run, the reference included (repeatable)")
     p.add_argument("--out", help="output folder (default: results/<scene name>_sweep)")
-    p.add_argument("--ranks-key", default="ranks", help="the --vary/--reference key giving the MPI rank count")
+    p.add_argument("--ranks-key", default="ranks", help="the --vary/--reference key giving the MPI rank count (default: ranks; without it every "
+                                                         "run takes 1 rank)")
     p.add_argument("--timeout", type=float, default=None, metavar="SECONDS",
                    help="stop a run after this wall time and record it as failed (default: no limit)")
     return p
