@@ -111,7 +111,9 @@ def prepare_output(scene, out_dir, comm):
         try:
             directory.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
-            raise SceneError(f"output.directory: cannot create {str(directory)!r}: {exc.strerror}") from None
+            key = "--out" if out_dir else "output.directory"
+            what = " (a file of that name is there)" if directory.is_file() else ""
+            raise SceneError(f"{key}: cannot create the folder {str(directory)!r}: {exc.strerror}{what}") from None
         check_output_folder(directory)
         try:
             clear_results(directory)

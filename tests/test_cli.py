@@ -645,6 +645,18 @@ def test_an_unprefixed_solver_option_is_an_input_error(tmp_path, command, option
     assert "Traceback" not in proc.stderr + proc.stdout
 
 
+def test_an_out_folder_that_is_a_file_names_the_flag(tmp_path):
+    """--out naming a file: the error shall name --out (it named the scene key output.directory) and say that a
+    file is there (a helper's pass)."""
+    path = tmp_path / "afile"
+    path.write_text("")
+    proc = subprocess.run([sys.executable, "-m", "qsc_petsc.cli", "run", str(CONFIGS / "block_compression.toml"),
+                           "--out", str(path)], capture_output=True, text=True, timeout=120, check=False)
+    assert proc.returncode == 2
+    assert proc.stdout.strip().splitlines()[-1] == (f"qsc: error: --out: cannot create the folder {str(path)!r}: "
+                                                    "File exists (a file of that name is there)"), proc.stdout
+
+
 def test_an_unprefixed_option_from_the_environment_is_left_alone(tmp_path):
     """PETSC_OPTIONS (or a .petscrc) may hold options for other programs: an unprefixed solver option there is not
     an error, only on the command line (every run stopped with exit 2; hunt27_4)."""
