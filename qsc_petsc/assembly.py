@@ -710,17 +710,25 @@ def _centred(comm, x):
     return x - comm.allreduce(x.sum(axis=0), op=MPI.SUM) / max(comm.allreduce(len(x)), 1)
 
 
+def _body_rows(mesh):
+    """Per body (collective): this rank's vertex rows of it (a slice when they are all the rank's rows: strided
+    writes, not scattered ones) and their points less the body's centroid."""
+    row_body = mesh.vertex_body[mesh.owned_rows]
+    for b in range(len(mesh.body_names)):
+        r = np.flatnonzero(row_body == b)
+        x = _centred(mesh.comm, mesh.coords[mesh.owned_rows[r]])
+        yield (slice(None) if len(r) == len(row_body) else r), x
+
+
 def dilatations(mesh, template):
     """Per body, the displacement of a unit strain in every direction on it, u = x - (its centroid), and 0
     elsewhere (Vecs like template): K times one is the force scale of a unit strain of that body (System's force
     floor)."""
-    row_body = mesh.vertex_body[mesh.owned_rows]
     out = []
-    for b in range(len(mesh.body_names)):
+    for r, x in _body_rows(mesh):
         vec = template.duplicate()
         vec.set(0.0)
-        r = np.flatnonzero(row_body == b)
-        vec.getArray().reshape(-1, 3)[r] = _centred(mesh.comm, mesh.coords[mesh.owned_rows[r]])
+        vec.getArray().reshape(-1, 3)[r] = x
         out.append(vec)
     return out
 
@@ -738,13 +746,8 @@ def rigid_body_modes(mesh, template, held=()):
     for surface, normal in held:
         v = mesh.surface_vertices(surface)
         held_rows.append((mesh.gvert[v[mesh.owned[v]]] - v0, normal))
-    row_body = mesh.vertex_body[mesh.owned_rows]
     vecs = []
-    for b in range(len(mesh.body_names)):
-        r = np.flatnonzero(row_body == b)
-        x = _centred(comm, mesh.coords[mesh.owned_rows[r]])
-        if len(r) == len(row_body):
-            r = slice(None)                # the whole rank's rows: strided writes, not scattered ones
+    for r, x in _body_rows(mesh):
         modes = [template.duplicate() for _ in range(6)]
         for k, v in enumerate(modes):      # about the centroid
             v.set(0.0)

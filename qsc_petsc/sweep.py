@@ -88,8 +88,9 @@ def parse_variation(text, flag, ranks_key, single=False):
     if key.startswith("-"):
         if not PETSC_KEY.fullmatch(key):
             raise SweepInputError(f"{flag} {text!r}: {key!r} is not a PETSc option name (e.g. -qsc_pc_type)")
-        if unread_option(key[1:]) is not None:
-            raise SweepInputError(f"{flag} {text!r}: {unread_option(key[1:])}")
+        unread = unread_option(key[1:])
+        if unread is not None:
+            raise SweepInputError(f"{flag} {text!r}: {unread}")
         return Variation(key, values, "petsc", text)
     return Variation(key, values, "scene", text)
 
@@ -181,8 +182,9 @@ def make_plan(argv):
             reference_only.append(v)
     petsc_names = {tok for tok in petsc if PETSC_KEY.fullmatch(tok)}
     for name in sorted(petsc_names):
-        if unread_option(name[1:]) is not None:
-            raise SweepInputError(unread_option(name[1:]))
+        unread = unread_option(name[1:])
+        if unread is not None:
+            raise SweepInputError(unread)
     set_keys = {s.partition("=")[0].strip() for s in args.set}
     for v in variations + reference_only:
         if v.kind == "petsc" and v.key in petsc_names:

@@ -168,7 +168,7 @@ def _search_pass(mesh, T, X, U, radius, points, memo=None):
         memo["key"] = found["key"]
     # the T material point each point faces, in the reference configuration (also ContactModel.report's slip)
     found["target_ref"] = quadrature.faced_points(found, fx)
-    return quadrature.found_pass(points, found, gv, fx, fsize, found["target_ref"]), found["face"] >= 0, found
+    return quadrature.found_pass(points, found, gv, fx, fsize), found["face"] >= 0, found
 
 
 def project_pass(mesh, S, T, X, U, radius, memo=None, which=None):

@@ -13,6 +13,7 @@ import numpy as np
 from .. import fem
 from . import geometry
 from .rows import Pass
+from .search import found_entries
 
 
 def gauss_points(face_type, xs_ref, xs_cur, s_gids, n):
@@ -48,28 +49,21 @@ def faced_points(found, t_xref):
     return out
 
 
-def found_pass(points, found, t_gids, t_xref, t_size, faced=None):
+def found_pass(points, found, t_gids, t_xref, t_size):
     """The Pass of the points that found a T face; found is search.closest_faces' dict for points["x_cur"].
 
     points: dict with x_ref, weight, size, node and optionally source_nodes, source_shape
     (nodal quadrature when absent); a point's weight is scaled by its edge_factor (search.closest_faces) and
-    shared among the faces at the same distance (found["share"], found["extra"]: one entry each).
-    t_gids (k, nv), t_xref (k, nv, 3), t_size (k,): the T faces given to the search; faced:
-    faced_points(found, t_xref) when the caller has it already.
+    shared among the faces at the same distance (search.found_entries: one entry each).
+    t_gids (k, nv), t_xref (k, nv, 3), t_size (k,): the T faces given to the search.
     """
-    ok = np.flatnonzero(found["face"] >= 0)
-    x_target = (faced_points(found, t_xref) if faced is None else faced)[ok]
-    extra = found["extra"]
-    q = np.concatenate([ok, extra["point"]])
-    f = np.concatenate([found["face"][ok], extra["face"]])
-    N = np.concatenate([found["shape"][ok], extra["shape"]])
-    normal = np.concatenate([found["normal"][ok], extra["normal"]])
-    x_target = np.concatenate([x_target, np.einsum("pv,pvi->pi", extra["shape"], t_xref[extra["face"]])])
-    factor = np.concatenate([found["edge_factor"][ok], extra["edge_factor"]]) / found["share"][q]
-    delta0 = np.einsum("pi,pi->p", points["x_ref"][q] - x_target, normal)
+    q, e, part = found_entries(found, ("face", "shape", "normal"))
+    f = e["face"]
+    x_target = np.einsum("pv,pvi->pi", e["shape"], t_xref[f])
+    delta0 = np.einsum("pi,pi->p", points["x_ref"][q] - x_target, e["normal"])
     src = points.get("source_nodes")
-    return Pass(node=points["node"][q], area=points["weight"][q] * factor, size=points["size"][q],
-                target_nodes=np.asarray(t_gids)[f], shape=N, normal=normal, delta0=delta0,
+    return Pass(node=points["node"][q], area=points["weight"][q] * part, size=points["size"][q],
+                target_nodes=np.asarray(t_gids)[f], shape=e["shape"], normal=e["normal"], delta0=delta0,
                 target_size=np.asarray(t_size)[f], source_nodes=None if src is None else src[q],
                 source_shape=None if src is None else points["source_shape"][q])
 

@@ -21,6 +21,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..sparsity import row_spans
+from .search import found_entries
+
 _I = np.int64
 
 
@@ -124,19 +127,12 @@ class Pass:
         """The Pass of the points that found a face: found is search.closest_faces' dict for points `node`.
 
         face_nodes (m, nv) global vertex ids and face_size (m,) of the faces given to the search; a point's area
-        is scaled by its edge_factor and shared among the faces at the same distance (found["extra"]).
+        is scaled by its edge_factor and shared among the faces at the same distance (search.found_entries).
         """
-        ok = np.flatnonzero(np.asarray(found["face"]) >= 0)
-        extra = found["extra"]
-        q = np.concatenate([ok, extra["point"]])
-        fo = np.concatenate([found["face"][ok], extra["face"]])
-
-        def both(name):
-            return np.concatenate([found[name][ok], extra[name]])
-
-        return Pass(node=np.asarray(node)[q], area=np.asarray(area)[q] * both("edge_factor") / found["share"][q],
-                    size=np.asarray(size)[q], target_nodes=np.asarray(face_nodes)[fo], shape=both("shape"),
-                    normal=both("normal"), delta0=both("signed_gap"), target_size=np.asarray(face_size)[fo])
+        q, e, part = found_entries(found, ("face", "shape", "normal", "signed_gap"))
+        return Pass(node=np.asarray(node)[q], area=np.asarray(area)[q] * part, size=np.asarray(size)[q],
+                    target_nodes=np.asarray(face_nodes)[e["face"]], shape=e["shape"], normal=e["normal"],
+                    delta0=e["signed_gap"], target_size=np.asarray(face_size)[e["face"]])
 
 
 def _pass_entries(pss):
@@ -288,23 +284,25 @@ def project_master_rows(parts, node_pass):
     G_r, G_c, G_v, g_r, g_v, W_r, W_v = parts
     order = np.argsort(node_pass.node, kind="stable")
     known = node_pass.node[order]
-    # each entry's part of its node: 1 unless shared
-    _, first, inverse = np.unique(known, return_index=True, return_inverse=True)
-    total = np.add.reduceat(node_pass.area[order], first) if len(known) else np.zeros(0)
+    # the entries of each master node, CSR-like over its distinct nodes, and each entry's part of its node (1
+    # unless shared)
+    starts = np.flatnonzero(np.r_[True, known[1:] != known[:-1]]) if len(known) else np.zeros(0, _I)
+    nodes, ptr = known[starts], np.r_[starts, len(known)]
+    area = node_pass.area[order]
+    total = np.repeat(np.add.reduceat(area, starts), np.diff(ptr)) if len(known) else area
     part = np.empty(len(known))
-    part[order] = np.divide(node_pass.area[order], total[inverse], out=np.ones(len(known)),
-                            where=total[inverse] > 0)
+    part[order] = np.divide(area, total, out=np.ones(len(known)), where=total > 0)
 
     def spread(rows):
         """For every entry of row 3 l: the new rows 3 k, the entry it comes from and its factor N^k."""
         l = np.asarray(rows, dtype=_I) // 3
-        lo, hi = np.searchsorted(known, l, "left"), np.searchsorted(known, l, "right")
-        count = hi - lo
-        src = np.repeat(np.arange(len(l)), count)
-        pos = order[np.repeat(lo, count) + np.arange(len(src)) - np.repeat(np.cumsum(count) - count, count)]
+        i = np.minimum(np.searchsorted(nodes, l), max(len(nodes) - 1, 0))
+        hit = (nodes[i] == l) if len(nodes) else np.zeros(len(l), dtype=bool)
+        at, which = row_spans(ptr, i[hit])
+        pos = order[at]
         N = node_pass.shape[pos] * part[pos][:, None]               # (h, nv)
         e, kk = np.nonzero(N != 0.0)
-        return 3 * node_pass.target_nodes[pos[e], kk], src[e], N[e, kk]
+        return 3 * node_pass.target_nodes[pos[e], kk], np.flatnonzero(hit)[which][e], N[e, kk]
 
     G_rows, src, f = spread(G_r)
     g_rows, g_src, g_f = spread(g_r)

@@ -174,6 +174,18 @@ def _shared(p, pi, fi, entry, is_first, level, face):
     return share, extra
 
 
+def found_entries(found, names):
+    """Every (point, face) entry of a closest_faces answer: the points that found a face, then the other faces of
+    the shared ones (found["extra"]). Returns the point of each entry, {name: its values} for `names`, and each
+    entry's part of its point's weight (edge_factor / share)."""
+    ok = np.flatnonzero(found["face"] >= 0)
+    extra = found["extra"]
+    point = np.concatenate([ok, extra["point"]])
+    values = {name: np.concatenate([found[name][ok], extra[name]]) for name in names}
+    part = np.concatenate([found["edge_factor"][ok], extra["edge_factor"]]) / found["share"][point]
+    return point, values, part
+
+
 def closest_faces(points, face_xyz, face_type, face_key, radius, band=None, keep=None, keep_within=None):
     """The face each point projects on: the nearest within radius, ties broken by the smallest face_key row.
 
