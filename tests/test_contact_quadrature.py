@@ -3,7 +3,7 @@ weights integrate the right areas, and the rules converge to exact integration."
 
 import numpy as np
 import pytest
-from test_contact_kernels import away_from_kinks, check_derivatives, dense, flat, make_pass, pair, response
+from test_contact_kernels import Surface, away_from_kinks, check_derivatives, dense, flat, make_pass, pair, response
 
 from qsc_petsc.contact import quadrature
 from qsc_petsc.contact.rows import master_slave, quasi_symmetric, quasi_symmetric_master_nodes, two_pass, weights
@@ -129,6 +129,26 @@ def test_segment_rows_force_and_jacobian_are_derivatives(name, mesh):
     A, B, ndof = pair(*mesh)
     rows = RULES[name](segment(A, B), segment(B, A))
     check_derivatives(rows, ndof, away_from_kinks(rows, ndof, 0.01, seed=6))
+
+
+@pytest.mark.parametrize("face_type", ["quad", "tri"])
+def test_segment_pass_takes_no_face_turned_away(face_type):
+    """A thin body's whole skin as the T surface: its far side, within reach and turned away from S, shall add
+    no point (it read the thickness as penetration); the pass equals the one against the near side alone."""
+    S = Surface(3, face_type, flat, 0, down=True)                         # z = 0, facing down
+    near = Surface(4, face_type, flat, len(S.ids), offset=0.0)            # z = 0, facing up: in contact
+    far = Surface(4, face_type, flat, len(S.ids) + len(near.ids), down=True, offset=-0.1)   # z = -0.1, down
+
+    class Skin:
+        type, xyz = face_type, np.concatenate([near.xyz, far.xyz])
+        faces = np.concatenate([near.faces, far.faces + len(near.xyz)])
+        gfaces = np.concatenate([near.gfaces, far.gfaces])
+        face_size = np.concatenate([near.face_size, far.face_size])
+
+    alone, skin = segment(S, near), segment(S, Skin)
+    assert len(alone.node) > 0
+    for name in ("node", "area", "target_nodes", "shape", "normal", "delta0"):
+        np.testing.assert_array_equal(getattr(skin, name), getattr(alone, name), err_msg=name)
 
 
 @pytest.mark.parametrize("face_type", ["quad", "tri"])
