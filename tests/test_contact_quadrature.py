@@ -1,10 +1,13 @@
 """Gauss-point and segment quadratures of a contact pass (formulation.md section 8): rows are exact derivatives,
 weights integrate the right areas, and the rules converge to exact integration."""
 
+from math import factorial
+
 import numpy as np
 import pytest
 from test_contact_kernels import Surface, away_from_kinks, check_derivatives, dense, flat, make_pass, pair, response
 
+from qsc_petsc import fem
 from qsc_petsc.contact import quadrature
 from qsc_petsc.contact.rows import master_slave, quasi_symmetric, quasi_symmetric_master_nodes, two_pass, weights
 from qsc_petsc.contact.search import closest_faces
@@ -39,7 +42,7 @@ def test_gauss_weights_integrate_the_area_and_shape_functions(face_type):
     """Gauss weights shall sum to the S area and sum_q N_S^k w_q (the row weights W) to the nodal areas."""
     A, B, ndof = pair(3, face_type, 5, face_type)          # warped: the weights include the surface Jacobian
     sp = gauss_pass(A, B, 2)                                # the fixture's nodal areas use the same 2 x 2 rule
-    assert len(sp.node) == len(A.faces) * 4
+    assert len(sp.node) == len(A.faces) * len(fem.contact_face_rule(face_type, 2)[1])
     nodal = np.zeros(len(A.ids))
     np.add.at(nodal, sp.source_nodes.ravel() - A.ids[0], (sp.source_shape * sp.area[:, None]).ravel())
     np.testing.assert_allclose(nodal, A.area, rtol=1e-12)
@@ -47,6 +50,30 @@ def test_gauss_weights_integrate_the_area_and_shape_functions(face_type):
     W = np.zeros(ndof)
     np.add.at(W, rows.W_rows, rows.W_vals)
     np.testing.assert_allclose(W[3 * A.ids], A.area, rtol=1e-12)
+
+
+@pytest.mark.parametrize("n", range(1, 7))
+def test_gauss_points_of_a_triangle_do_not_depend_on_its_vertex_order(n):
+    """A triangle's contact Gauss points (gauss_points = n) shall be the same physical points with the same weights
+    whatever the order its vertices are listed in (a mirror image lists them otherwise: the collapsed n x n rule
+    made a symmetric punch on tets asymmetric), at least n^2 of them, exact to degree 2n - 2 as on quads."""
+    tri = np.array([[0.1, 0.0, 0.2], [1.3, 0.2, 0.0], [0.4, 0.9, 0.3]])
+    ids = np.array([7, 8, 9])
+
+    def points(order):
+        pts = quadrature.gauss_points("tri", tri[order][None], tri[order][None], ids[order][None], n)
+        return np.unique(np.round(np.column_stack([pts["x_ref"], pts["weight"]]), 12), axis=0)
+
+    first = points([0, 1, 2])
+    assert len(first) >= n * n
+    for order in ([1, 0, 2], [0, 2, 1], [2, 0, 1], [2, 1, 0]):
+        np.testing.assert_array_equal(points(order), first)
+    xi, w = fem.contact_face_rule("tri", n)
+    degree = 1 if n == 1 else 2 * n - 2
+    for i in range(degree + 1):
+        for j in range(degree + 1 - i):
+            exact = factorial(i) * factorial(j) / factorial(i + j + 2)
+            assert np.sum(w * xi[:, 0] ** i * xi[:, 1] ** j) == pytest.approx(exact, rel=1e-13, abs=1e-16)
 
 
 def test_matching_meshes_gauss_equals_nodal_mean():

@@ -16,6 +16,7 @@ import numpy as np
 from qsc_petsc import fem
 from qsc_petsc.contact.geometry import cross, face_normal_at, face_tangents_at
 from qsc_petsc.errors import MeshError
+from qsc_petsc.fem import triangle_rule
 
 NEWTON_TOL = 1e-13          # on the natural-coordinate update (xi is O(1))
 NEWTON_MAX_IT = 50
@@ -115,43 +116,6 @@ def candidate_pairs(xs, xt, distance):
     i, j = idx[0][ps[own]], idx[1][pt[own]]
     srt = np.lexsort((j, i))
     return i[srt].astype(np.int64), j[srt].astype(np.int64)
-
-
-def triangle_rule(degree):
-    """Rule on a triangle exact for polynomials of total degree `degree`: barycentric points (r, 3), weights (r,) summing to 1.
-
-    Symmetric rules with positive weights and interior points (Strang-Fix /
-    Dunavant, closed forms) up to degree 5; collapsed Gauss (fem.gauss_tri) above.
-    """
-    degree = int(degree)
-    if degree < 0:
-        raise ValueError(f"triangle_rule: degree must be >= 0, got {degree}")
-    if degree <= 1:
-        return np.full((1, 3), 1.0 / 3.0), np.ones(1)
-    if degree == 2:
-        b = np.full((3, 3), 1.0 / 6.0)
-        np.fill_diagonal(b, 2.0 / 3.0)
-        return b, np.full(3, 1.0 / 3.0)
-
-    def orbit(a):
-        """The 3 points (a, a, 1 - 2a) and permutations."""
-        b = np.full((3, 3), a)
-        np.fill_diagonal(b, 1.0 - 2.0 * a)
-        return b
-
-    if degree <= 4:                          # 6 points; the 6-point degree-3 rule's weights are no better
-        s = np.sqrt(38.0 - 44.0 * np.sqrt(0.4))
-        a1, a2 = (8.0 - np.sqrt(10.0) + s) / 18.0, (8.0 - np.sqrt(10.0) - s) / 18.0
-        r = np.sqrt(213125.0 - 53320.0 * np.sqrt(10.0))
-        w1, w2 = (620.0 + r) / 3720.0, (620.0 - r) / 3720.0
-        return np.vstack([orbit(a1), orbit(a2)]), np.repeat([w1, w2], 3)
-    if degree == 5:                          # Radon's 7 points
-        q = np.sqrt(15.0)
-        return (np.vstack([np.full((1, 3), 1.0 / 3.0), orbit((6.0 - q) / 21.0), orbit((6.0 + q) / 21.0)]),
-                np.concatenate([[9.0 / 40.0], np.full(3, (155.0 - q) / 1200.0), np.full(3, (155.0 + q) / 1200.0)]))
-    n = (degree + 3) // 2                    # collapsed n x n Gauss is exact to 2n - 2
-    xi, w = fem.gauss_tri(n)
-    return np.column_stack([1.0 - xi[:, 0] - xi[:, 1], xi[:, 0], xi[:, 1]]), 2.0 * w
 
 
 def _cross2(a, b):

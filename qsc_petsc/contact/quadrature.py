@@ -24,13 +24,14 @@ FACING = 0.0
 
 
 def gauss_points(face_type, xs_ref, xs_cur, s_gids, n):
-    """n x n Gauss points of S faces (reference xs_ref and current xs_cur (m, nv, 3), global ids s_gids (m, nv)).
+    """Gauss points of S faces (reference xs_ref and current xs_cur (m, nv, 3), global ids s_gids (m, nv)): n x n
+    on quads, fem.contact_face_rule's symmetric rule on triangles.
 
-    Returns a dict over the m * n^2 points: x_ref, x_cur (q, 3), weight (q,) [m^2 on the
+    Returns a dict over the points: x_ref, x_cur (q, 3), weight (q,) [m^2 on the
     reference S], source_nodes (q, nv), source_shape (q, nv), node (q,) (the face node
     nearest the point), size (q,) (the S face's size) [m].
     """
-    xi, w = fem.GAUSS[face_type](n)
+    xi, w = fem.contact_face_rule(face_type, n)
     N, _ = fem.SHAPE[face_type](xi)                                   # (nq, nv)
     m, nq, nv = len(xs_ref), len(w), N.shape[1]
     if m == 0:

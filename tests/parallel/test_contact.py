@@ -34,6 +34,35 @@ def test_matching_patch_test_is_exact(comm, mpi_tmp, formulation):
     run.destroy()
 
 
+@pytest.mark.parametrize("formulation", FORMULATIONS)
+def test_contact_area_is_the_pressed_area(comm, mpi_tmp, formulation):
+    """Under an uneven pressure the whole interface of the patch test stays pressed: the reported contact area is
+    its 1 m2 on both sides for every formulation (two_pass, whose rows cannot all close, read 0.834)."""
+    _, summary = run_scene(CONFIGS / "patch_test.toml", mpi_tmp,
+                           [f"contact.0.formulation={formulation}",
+                            'boundary.5.value="1 + 0.5 * cos(pi * x) * cos(pi * y)"'], comm)
+    pair = next(iter(summary["steps"][-1]["contact"].values()))
+    assert pair["contact_area"] == pytest.approx(1.0, rel=1e-12)
+    assert pair["contact_area_master"] == pytest.approx(1.0, rel=1e-12)
+
+
+def test_quasi_symmetric_at_weight_zero_is_master_slave_the_other_way(comm, mpi_tmp):
+    """weight = 0 leaves the slave's nodes only the rows under the master's points; its fine slave nodes passing
+    into the coarse master are then the formulation's, not out of reach (they stopped the run with exit 3):
+    the answer is master_slave's with the roles swapped."""
+    meshes = ["bodies.0.mesh.cells=[2,2,2]", "bodies.1.mesh.cells=[8,8,2]", "contact.0.integration=nodal"]
+    out = []
+    for k, change in enumerate((["contact.0.weight=0"],
+                                ["contact.0.formulation=master_slave", "contact.0.slave=lower.zmax",
+                                 "contact.0.master=upper.zmin"])):
+        run, summary = run_scene(CONFIGS / "patch_test.toml", mpi_tmp / str(k), meshes + change, comm)
+        assert summary["status"] == "ok"
+        pair = next(iter(summary["steps"][-1]["contact"].values()))
+        out.append([summary["steps"][-1]["max_abs_displacement"], pair["total_normal_force"]])
+        run.destroy()
+    np.testing.assert_allclose(out[0], out[1], rtol=1e-10)
+
+
 def test_two_pass_is_symmetric_in_the_roles(comm, mpi_tmp):
     """two_pass gives the same displacements when slave and master swap (non-matching meshes)."""
     sums = []
