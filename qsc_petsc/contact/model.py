@@ -56,6 +56,7 @@ class Surface:
     normal: np.ndarray         # area-weighted outward unit normal at each owned node
     mean_size: float           # mean face size over the whole surface (all ranks) [m]
     total_area: float
+    template: object = None    # a Vec of the dofs' layout (nodal_normals' sums)
 
 
 def _owned_rows(mesh, v):
@@ -79,34 +80,47 @@ def surface_data(mesh, name, template):
     xf = mesh.coords[faces]
     nodal = fem.face_nodal_areas(mesh.face_type, xf) if len(faces) else np.zeros((0, faces.shape[1]))
     size = fem.face_size(xf) if len(faces) else np.zeros(0)
-    normal, _ = fem.face_normals(mesh.face_type, xf, fem.CENTROID[mesh.face_type][None, :])
-    acc = template.duplicate()
-    acc_n = template.duplicate()
-    for vec in (acc, acc_n):
-        vec.set(0.0)
-    dofs = 3 * mesh.gvert[faces]
-    acc.setValues(dofs.ravel().astype(PETSc.IntType), nodal.ravel(), addv=PETSc.InsertMode.ADD_VALUES)
-    acc.setValues((dofs + 1).ravel().astype(PETSc.IntType), (nodal * size[:, None]).ravel(),
-                  addv=PETSc.InsertMode.ADD_VALUES)
-    ndofs = (dofs[:, :, None] + np.arange(3)).ravel().astype(PETSc.IntType)
-    acc_n.setValues(ndofs, (nodal[:, :, None] * normal[:, 0, None, :]).ravel(), addv=PETSc.InsertMode.ADD_VALUES)
-    acc.assemble()
-    acc_n.assemble()
+    per_node = np.zeros(nodal.shape + (3,))
+    per_node[..., 0], per_node[..., 1] = nodal, nodal * size[:, None]
     nodes = np.unique(np.concatenate([mesh.surface_vertices(n) for n in names]))
     nodes = nodes[mesh.owned[nodes]]
-    pos = _owned_rows(mesh, nodes)
-    a = acc.getArray().reshape(-1, 3)[pos]
-    nvec = acc_n.getArray().reshape(-1, 3)[pos]
-    acc.destroy()
-    acc_n.destroy()
+    a = _nodal_sums(mesh, faces, per_node, nodes, template)
     area = a[:, 0]
     keep = area > 0                       # a labelled vertex that touches the surface only elsewhere
-    nodes, area, a, nvec = nodes[keep], area[keep], a[keep], nvec[keep]
-    nrm = np.linalg.norm(nvec, axis=1)
+    nodes, area, a = nodes[keep], area[keep], a[keep]
     total_size = comm.allreduce(float(size.sum()), op=MPI.SUM)
     count = comm.allreduce(len(size), op=MPI.SUM)
-    return Surface(name, body, faces, nodes, area, a[:, 1] / area, nvec / np.where(nrm > 0, nrm, 1.0)[:, None],
-                   total_size / max(count, 1), comm.allreduce(float(nodal.sum()), op=MPI.SUM))
+    S = Surface(name, body, faces, nodes, area, a[:, 1] / area, None, total_size / max(count, 1),
+                comm.allreduce(float(nodal.sum()), op=MPI.SUM), template)
+    S.normal = nodal_normals(mesh, S, mesh.coords)
+    return S
+
+
+def _nodal_sums(mesh, faces, values, nodes, template):
+    """Sums over ranks of values (k, nv, 3) given at each local face's nodes, read at owned local vertices nodes
+    (collective)."""
+    acc = template.duplicate()
+    acc.set(0.0)
+    dofs = (3 * mesh.gvert[faces][:, :, None] + np.arange(3)).ravel().astype(PETSc.IntType)
+    acc.setValues(dofs, values.ravel(), addv=PETSc.InsertMode.ADD_VALUES)
+    acc.assemble()
+    out = acc.getArray().reshape(-1, 3)[_owned_rows(mesh, nodes)].copy()
+    acc.destroy()
+    return out
+
+
+def nodal_normals(mesh, S, x):
+    """The area-weighted outward unit normals of S's owned nodes with the local vertices at x (collective): the
+    faces' centroid normals weighted by the nodes' tributary areas on them."""
+    xf = x[S.faces]
+    if len(S.faces):
+        nodal = fem.face_nodal_areas(mesh.face_type, xf)
+        normal, _ = fem.face_normals(mesh.face_type, xf, fem.CENTROID[mesh.face_type][None, :])
+    else:
+        nodal, normal = np.zeros((0, S.faces.shape[1])), np.zeros((0, 1, 3))
+    nvec = _nodal_sums(mesh, S.faces, nodal[:, :, None] * normal[:, 0, None, :], S.nodes, S.template)
+    nrm = np.linalg.norm(nvec, axis=1)
+    return nvec / np.where(nrm > 0, nrm, 1.0)[:, None]
 
 
 def exchange_faces(mesh, faces, X, U, sizes, need_lo, need_hi):
@@ -163,7 +177,7 @@ def _search_pass(mesh, T, X, U, radius, points, memo=None):
     if keep is not None and len(keep) != len(points["x_cur"]):
         keep = None
     found = closest_faces(points["x_cur"], fx + fu, mesh.face_type, key, radius, EDGE_BAND * points["size"],
-                          keep, KEEP_TOL * points["size"])
+                          keep, KEEP_TOL * points["size"], points["normal"])
     if memo is not None:
         memo["key"] = found["key"]
     # the T material point each point faces, in the reference configuration (also ContactModel.report's slip)
@@ -177,7 +191,7 @@ def project_pass(mesh, S, T, X, U, radius, memo=None, which=None):
     which = slice(None) if which is None else which
     v = S.nodes[which]
     points = {"x_cur": X[v] + U[v], "x_ref": X[v], "node": mesh.gvert[v], "weight": S.area[which],
-              "size": S.size[which]}
+              "size": S.size[which], "normal": nodal_normals(mesh, S, X + U)[which]}
     return _search_pass(mesh, T, X, U, radius, points, memo)
 
 

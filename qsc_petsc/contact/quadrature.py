@@ -13,14 +13,7 @@ import numpy as np
 from .. import fem
 from . import geometry
 from .rows import Pass
-from .search import found_entries
-
-# segment integration takes a T face only if it is turned towards the S face, n_S . n_T <= FACING at their
-# centroids: the far side of a thin body whose whole skin is the surface lies within search_distance too, and
-# its faces, turned away, read the body's thickness as penetration (a block on a plate 0.8 h thick whose
-# top and bottom faces were the master surface: 864 points instead of 432, the plate's reaction 2e-11 against
-# 1.37 N, exit 0)
-FACING = 0.0
+from .search import FACING, found_entries
 
 
 def gauss_points(face_type, xs_ref, xs_cur, s_gids, n):
@@ -28,7 +21,7 @@ def gauss_points(face_type, xs_ref, xs_cur, s_gids, n):
     on quads, fem.contact_face_rule's symmetric rule on triangles.
 
     Returns a dict over the points: x_ref, x_cur (q, 3), weight (q,) [m^2 on the
-    reference S], source_nodes (q, nv), source_shape (q, nv), node (q,) (the face node
+    reference S], normal (q, 3) (S's outward normal at the point, current configuration), source_nodes (q, nv), source_shape (q, nv), node (q,) (the face node
     nearest the point), size (q,) (the S face's size) [m].
     """
     xi, w = fem.contact_face_rule(face_type, n)
@@ -36,14 +29,15 @@ def gauss_points(face_type, xs_ref, xs_cur, s_gids, n):
     m, nq, nv = len(xs_ref), len(w), N.shape[1]
     if m == 0:
         z = np.zeros(0)
-        return {"x_ref": np.zeros((0, 3)), "x_cur": np.zeros((0, 3)), "weight": z, "size": z,
-                "source_nodes": np.zeros((0, nv), dtype=np.int64), "source_shape": np.zeros((0, nv)),
+        return {"x_ref": np.zeros((0, 3)), "x_cur": np.zeros((0, 3)), "normal": np.zeros((0, 3)), "weight": z,
+                "size": z, "source_nodes": np.zeros((0, nv), dtype=np.int64), "source_shape": np.zeros((0, nv)),
                 "node": np.zeros(0, dtype=np.int64)}
     _, jac = fem.face_normals(face_type, xs_ref, xi)
     src = np.repeat(np.asarray(s_gids, dtype=np.int64), nq, axis=0)
     shp = np.tile(N, (m, 1))
     return {"x_ref": np.einsum("qv,mvi->mqi", N, xs_ref).reshape(-1, 3),
             "x_cur": np.einsum("qv,mvi->mqi", N, xs_cur).reshape(-1, 3),
+            "normal": fem.face_normals(face_type, xs_cur, xi)[0].reshape(-1, 3),
             "weight": (jac * w).reshape(-1), "size": np.repeat(fem.face_size(xs_ref), nq),
             "source_nodes": src, "source_shape": shp, "node": src[np.arange(len(src)), np.argmax(shp, axis=1)]}
 
@@ -80,7 +74,7 @@ def segment_pass(face_type, xs_ref, xs_cur, s_gids, xt_ref, xt_cur, t_gids, t_si
     """Exact (segment) integration of S faces against T faces: the overlaps cut into quadrature points, a Pass.
 
     face_type: "tri"/"quad", or a pair (S type, T type). The faces are clipped in their current configuration
-    (which decides what meets what); a T face turned away from the S face (FACING) meets none of it;
+    (which decides what meets what); a T face not turned towards the S face (search.FACING) meets none of it;
     points farther than radius [m] from T along its normal are dropped; weights are areas on
     the reference S surface, like the nodal areas.
     """

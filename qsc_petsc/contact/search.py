@@ -9,7 +9,7 @@ radius of the points it owns.
 import numpy as np
 
 from qsc_petsc import fem
-from qsc_petsc.contact.geometry import _dot, project_on_faces
+from qsc_petsc.contact.geometry import _dot, face_normal_at, project_on_faces
 
 # distances equal within TIE_TOL * (face size) are a tie, decided by the face key
 TIE_TOL = 1e-9
@@ -18,6 +18,14 @@ TIE_TOL = 1e-9
 EDGE_FULL = 0.1
 # a face may cover this many grid cells on average before the cells are made coarser
 _MAX_CELLS_PER_FACE = 27
+# a point meets a face only if the face is turned towards it: n_point . n_face <= FACING (outward normals, the
+# face's at its centroid), i.e. the two within about 84 degrees of facing each other. A surface may hold faces
+# that never meet the other one: a thin body's whole skin (the far side, within the search distance, read the
+# body's thickness as a gap or a penetration), the sides beside a punch's face (their Gauss points, projected
+# on the block with a gap of their height, opened the rows of the punch's edge), or a master's side face at a
+# convex edge (a slave node on the edge line, shared with it, was held sideways). Perpendicular faces are out
+# too: seen edge-on they meet nothing (hunt28_3).
+FACING = -0.1
 
 
 def _empty_pairs():
@@ -96,9 +104,15 @@ def candidate_pairs(points, face_min, face_max, radius):
     return pair_point[srt].astype(np.int64), pair_face[srt].astype(np.int64)
 
 
-def _nearest_candidates(points, face_xyz, radius, margin):
+def facing_pairs(point_normal, face_normal):
+    """Whether each (point, face) pair faces each other (FACING), their outward normals given per pair."""
+    return _dot(point_normal, face_normal) <= FACING
+
+
+def _nearest_candidates(points, face_xyz, radius, margin, facing=None):
     """The (point, face) pairs that may hold a point's nearest face within radius, or one within margin (p,) of
-    it (ties, keep's faces): sorted by point, then face.
+    it (ties, keep's faces): sorted by point, then face. facing (None, or (p, 3) the points' outward normals,
+    with the faces' centroid normals (m, 3): (normals, face_normals)): only pairs that face each other.
 
     A point's distance to any vertex of a face bounds its distance to its nearest face from above, and its
     distance to a face's box bounds that face's distance from below: only faces whose box lies within the
@@ -114,6 +128,9 @@ def _nearest_candidates(points, face_xyz, radius, margin):
     while len(todo):
         last = r >= radius
         pi, fi = candidate_pairs(points[todo], lo, hi, r)
+        if facing is not None:
+            turned = facing_pairs(facing[0][todo][pi], facing[1][fi])
+            pi, fi = pi[turned], fi[turned]
         x = points[todo][pi]
         box = np.sqrt(_dot(*(2 * [np.maximum(lo[fi] - x, 0.0) + np.maximum(x - hi[fi], 0.0)])))
         vertex = np.full(len(pi), np.inf)
@@ -186,8 +203,10 @@ def found_entries(found, names):
     return point, values, part
 
 
-def closest_faces(points, face_xyz, face_type, face_key, radius, band=None, keep=None, keep_within=None):
-    """The face each point projects on: the nearest within radius, ties broken by the smallest face_key row.
+def closest_faces(points, face_xyz, face_type, face_key, radius, band=None, keep=None, keep_within=None,
+                  normal=None):
+    """The face each point projects on: the nearest within radius among the faces turned towards it (normal (p, 3),
+    the points' outward unit normals: FACING; None: all faces), ties broken by the smallest face_key row.
 
     points (p, 3); face_xyz (m, nv, 3); face_key (m, k) int64, e.g. each face's
     sorted global vertex ids (partition independent). Returns a dict of (p, ...)
@@ -241,7 +260,11 @@ def closest_faces(points, face_xyz, face_type, face_key, radius, band=None, keep
 
     margin = TIE_TOL * float(fem.face_size(face_xyz).max()) + (0.0 if keep is None else
                                                                 np.broadcast_to(keep_within, (p,)))
-    pi, fi = _nearest_candidates(points, face_xyz, radius, np.broadcast_to(margin, (p,)))
+    facing = None
+    if normal is not None:
+        centroid = np.broadcast_to(fem.CENTROID[face_type], (len(face_xyz), 2))
+        facing = (np.asarray(normal, dtype=float).reshape(-1, 3), face_normal_at(face_type, face_xyz, centroid))
+    pi, fi = _nearest_candidates(points, face_xyz, radius, np.broadcast_to(margin, (p,)), facing)
     proj = project_on_faces(points[pi], face_xyz[fi], face_type)
     near = proj.distance <= radius
     pi, fi = pi[near], fi[near]

@@ -8,7 +8,9 @@ import pytest
 from conftest import CONFIGS, all_close, run_scene
 from mpi4py import MPI
 
+from qsc_petsc import fem
 from qsc_petsc.errors import SceneError
+from qsc_petsc.meshgen import box_mesh
 
 FORMULATIONS = ["master_slave", "two_pass", "quasi_symmetric"]
 
@@ -61,6 +63,80 @@ def test_quasi_symmetric_at_weight_zero_is_master_slave_the_other_way(comm, mpi_
         out.append([summary["steps"][-1]["max_abs_displacement"], pair["total_normal_force"]])
         run.destroy()
     np.testing.assert_allclose(out[0], out[1], rtol=1e-10)
+
+
+SKIN_SCENE = """
+name = "skin"
+[[bodies]]
+name = "plate"
+mesh = {{ type = "file", path = "plate.msh" }}
+material = {{ youngs_modulus = 1000.0, poissons_ratio = 0.3 }}
+[[bodies]]
+name = "punch"
+mesh = {{ type = "file", path = "punch.msh" }}
+material = {{ youngs_modulus = 1000.0, poissons_ratio = 0.3 }}
+[[boundary]]
+surface = "plate.zmin"
+type = "displacement"
+ux = 0.0
+uy = 0.0
+uz = 0.0
+[[boundary]]
+surface = "punch.zmax"
+type = "displacement"
+ux = 0.0
+uy = 0.0
+uz = -0.002
+[[contact]]
+slave = "{slave}"
+master = "{master}"
+formulation = "{formulation}"
+integration = "{integration}"
+[petsc]
+ksp_type = "preonly"
+pc_type = "lu"
+pc_factor_mat_solver_type = "mumps"
+"""
+
+
+def write_box_file(path, origin, size, cells):
+    """A hex box as a gmsh 2.2 file whose physical surfaces are its sides (a file body also gets "boundary")."""
+    box = box_mesh(origin, size, cells, "hex")
+    blocks, tags, names = [("hexahedron", box.cells)], [np.full(len(box.cells), 100)], {"solid": np.array([100, 3])}
+    for tag, (side, rows) in enumerate(box.surfaces.items(), start=1):
+        blocks.append(("quad", fem.cell_faces("hex", box.cells[rows[:, 0]], rows[:, 1])))
+        tags.append(np.full(len(rows), tag))
+        names[side] = np.array([tag, 2])
+    import meshio
+    meshio.write(path, meshio.Mesh(box.points, blocks, cell_data={"gmsh:physical": tags, "gmsh:geometrical": tags},
+                                   field_data=names), file_format="gmsh22", binary=False)
+
+
+@pytest.mark.parametrize("formulation", FORMULATIONS)
+@pytest.mark.parametrize("integration", ["segment", "gauss", "nodal"])
+def test_a_whole_skin_as_surface_gives_the_touching_faces_answer(comm, mpi_tmp, formulation, integration):
+    """A punch on a plate one element thick (within the search distance), the pair named by the touching faces or by both bodies' whole skins
+    (every boundary face of a file body): the same answer. The skins' other faces lie within reach (the plate's
+    bottom, the punch's sides) but are not turned towards the other surface: they read the plate's thickness as
+    a penetration or a gap, or their side's height as a gap, and opened or loaded rows (the punch sank 30-80x
+    deeper, its edge rows opened; exit 0). Nodal rows differ by the side faces' share of the edge nodes' areas."""
+    if comm.rank == 0:
+        # cubic cells, so that every face of a body is of one size: the skins leave the penalty's h_eff as it is
+        write_box_file(str(mpi_tmp / "plate.msh"), (0.0, 0.0, 0.0), (1.0, 1.0, 0.2), (5, 5, 1))
+        write_box_file(str(mpi_tmp / "punch.msh"), (0.3, 0.3, 0.2), (0.4, 0.4, 0.4), (3, 3, 3))
+    out = []
+    for k, (slave, master) in enumerate((("punch.zmin", "plate.zmax"), ("punch.boundary", "plate.boundary"))):
+        if comm.rank == 0:
+            (mpi_tmp / f"s{k}.toml").write_text(SKIN_SCENE.format(slave=slave, master=master,
+                                                                  formulation=formulation, integration=integration))
+        comm.barrier()
+        run, summary = run_scene(mpi_tmp / f"s{k}.toml", mpi_tmp / f"o{k}", (), comm)
+        assert summary["status"] == "ok"
+        out.append(run.local_displacement(run.u)[run.mesh.owned])
+        run.destroy()
+    scale = comm.allreduce(float(np.abs(out[0]).max(initial=0.0)), op=MPI.MAX)
+    diff = comm.allreduce(float(np.abs(out[1] - out[0]).max(initial=0.0)), op=MPI.MAX)
+    assert diff <= (2e-2 if integration == "nodal" else 1e-10) * scale
 
 
 def test_two_pass_is_symmetric_in_the_roles(comm, mpi_tmp):
