@@ -119,12 +119,13 @@ def test_a_whole_skin_as_surface_gives_the_touching_faces_answer(comm, mpi_tmp, 
     (every boundary face of a file body): the same answer. The skins' other faces lie within reach (the plate's
     bottom, the punch's sides) but are not turned towards the other surface: they read the plate's thickness as
     a penetration or a gap, or their side's height as a gap, and opened or loaded rows (the punch sank 30-80x
-    deeper, its edge rows opened; exit 0). Nodal rows differ by the side faces' share of the edge nodes' areas."""
+    deeper, its edge rows opened; exit 0); the edge nodes' areas took in the sides (nodal rows 1.2 % off, the
+    reported contact area 50 % over, the normal force 15 % under)."""
     if comm.rank == 0:
         # cubic cells, so that every face of a body is of one size: the skins leave the penalty's h_eff as it is
         write_box_file(str(mpi_tmp / "plate.msh"), (0.0, 0.0, 0.0), (1.0, 1.0, 0.2), (5, 5, 1))
         write_box_file(str(mpi_tmp / "punch.msh"), (0.3, 0.3, 0.2), (0.4, 0.4, 0.4), (3, 3, 3))
-    out = []
+    out, reported = [], []
     for k, (slave, master) in enumerate((("punch.zmin", "plate.zmax"), ("punch.boundary", "plate.boundary"))):
         if comm.rank == 0:
             (mpi_tmp / f"s{k}.toml").write_text(SKIN_SCENE.format(slave=slave, master=master,
@@ -133,10 +134,14 @@ def test_a_whole_skin_as_surface_gives_the_touching_faces_answer(comm, mpi_tmp, 
         run, summary = run_scene(mpi_tmp / f"s{k}.toml", mpi_tmp / f"o{k}", (), comm)
         assert summary["status"] == "ok"
         out.append(run.local_displacement(run.u)[run.mesh.owned])
+        pair = next(iter(summary["steps"][-1]["contact"].values()))
+        reported.append([pair[k] for k in ("total_normal_force", "contact_area", "contact_area_master",
+                                           "max_penetration_slave")])
         run.destroy()
     scale = comm.allreduce(float(np.abs(out[0]).max(initial=0.0)), op=MPI.MAX)
     diff = comm.allreduce(float(np.abs(out[1] - out[0]).max(initial=0.0)), op=MPI.MAX)
-    assert diff <= (2e-2 if integration == "nodal" else 1e-10) * scale
+    assert diff <= 1e-10 * scale
+    np.testing.assert_allclose(reported[1], reported[0], rtol=1e-8)
 
 
 def test_two_pass_is_symmetric_in_the_roles(comm, mpi_tmp):
