@@ -289,7 +289,7 @@ def die_data(mesh, scene, template):
         whole = surfaces[0] if len(surfaces) == 1 else surface_data(mesh, die.surfaces, template)
         h = min(s.mean_size for s in surfaces)
         E = min(scene.bodies[s.body].material.youngs_modulus for s in surfaces)   # one E: scene.py checks it
-        dies.append({"index": i, "spec": die, "nodes": whole.nodes, "area": whole.area, "h": h,
+        dies.append({"index": i, "spec": die, "surface": whole, "nodes": whole.nodes, "area": whole.area, "h": h,
                      "eps_n": die.penalty * E / h, "radius": die.search_distance * h,
                      "total_area": whole.total_area, "surfaces": [(s.name, s.nodes) for s in surfaces]})
     return dies
@@ -394,8 +394,16 @@ class ContactModel:
                 n = np.asarray(spec.normal, dtype=float)
                 u_die = t * np.asarray(spec.motion, dtype=float)
                 v = dd["nodes"]
-                near = -_die_depth(dd, X, U, t) <= dd["radius"]
+                # the nodes within reach whose surface is turned towards the die (search.FACING, the die's normal
+                # as the other surface's), each with its area on the faces turned towards it (facing_areas): a
+                # body's whole skin as the die's surface gave the nodes of its sides rows and the edge nodes the
+                # sides' areas (the contact area 1.5 for a 1 m2 face)
+                S = dd["surface"]
+                turned = facing_pairs(nodal_normals(mesh, S, X + U), n)
+                near = (-_die_depth(dd, X, U, t) <= dd["radius"]) & turned
                 dd["near"] = near                   # the nodes with rows (missed)
+                toward = {"face": np.zeros(len(v), dtype=np.int64), "normal": np.tile(n, (len(v), 1))}
+                dd["area"] = facing_areas(mesh, S, X, U, slice(None), toward)[0]
                 rows = row_builders.die_rows(mesh.gvert[v[near]], dd["area"][near], X[v[near]], spec.point, n,
                                              u_die, spec.condition == "sticking")
                 out.append(self._term(f"die[{dd['index']}]", rows, dd["eps_n"], dd["h"], False, node_local=True))

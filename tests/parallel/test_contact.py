@@ -144,6 +144,53 @@ def test_a_whole_skin_as_surface_gives_the_touching_faces_answer(comm, mpi_tmp, 
     np.testing.assert_allclose(reported[1], reported[0], rtol=1e-8)
 
 
+DIE_SKIN_SCENE = """
+name = "die_skin"
+[[bodies]]
+name = "blk"
+mesh = {{ type = "file", path = "blk.msh" }}
+material = {{ youngs_modulus = 1000.0, poissons_ratio = 0.3 }}
+[[boundary]]
+surface = "blk.zmin"
+type = "displacement"
+ux = 0.0
+uy = 0.0
+uz = 0.0
+[[die]]
+name = "top"
+point = [0.0, 0.0, 0.25]
+normal = [0.0, 0.0, -1.0]
+motion = [0.0, 0.0, -0.01]
+surfaces = ["{surface}"]
+condition = "{condition}"
+[petsc]
+ksp_type = "preonly"
+pc_type = "lu"
+pc_factor_mat_solver_type = "mumps"
+"""
+
+
+@pytest.mark.parametrize("condition", ["frictionless", "sticking"])
+def test_a_die_on_a_whole_skin_presses_its_facing_face(comm, mpi_tmp, condition):
+    """A die on a plate's whole skin (one element thick, its far side within reach) shall give the answer of the
+    die on its top face, with the top's area: the sides' nodes took rows and the edge nodes the sides' areas
+    (contact area 1.5 for a 1 m2 face)."""
+    if comm.rank == 0:
+        write_box_file(str(mpi_tmp / "blk.msh"), (0.0, 0.0, 0.0), (1.0, 1.0, 0.25), (4, 4, 1))
+    out = []
+    for k, surface in enumerate(("blk.zmax", "blk.boundary")):
+        if comm.rank == 0:
+            (mpi_tmp / f"s{k}.toml").write_text(DIE_SKIN_SCENE.format(surface=surface, condition=condition))
+        comm.barrier()
+        run, summary = run_scene(mpi_tmp / f"s{k}.toml", mpi_tmp / f"o{k}", (), comm)
+        assert summary["status"] == "ok"
+        die = summary["steps"][-1]["contact"]["die[0] top"]
+        assert die["contact_area"] == pytest.approx(1.0, rel=1e-12)
+        out.append(die["force_on_bodies"] + [summary["steps"][-1]["max_abs_displacement"]])
+        run.destroy()
+    np.testing.assert_allclose(out[1], out[0], rtol=1e-10, atol=1e-12)
+
+
 def test_two_pass_is_symmetric_in_the_roles(comm, mpi_tmp):
     """two_pass gives the same displacements when slave and master swap (non-matching meshes)."""
     sums = []
