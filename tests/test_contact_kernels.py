@@ -326,6 +326,31 @@ def test_a_wide_search_projects_only_the_faces_that_may_be_nearest(face_type, mo
         np.testing.assert_array_equal(got["extra"]["face"], ref["extra"]["face"])
     assert calls and (got["face"] >= 0).sum() == (normal[:, 2] > 0).sum() and (got["share"] > 1).any()
 
+def test_a_point_in_front_of_a_face_turned_away_meets_none():
+    """A chisel over a plate: its vertical face (x = 0, outward -x) and its bevel (outward down and +x) meet at the
+    edge x = z = 0. A plate node beside the edge (outward +z) is as near to both faces; it is in front of the
+    vertical face, turned away from it, so outside the chisel: no face (the bevel's plane alone read it as
+    penetrating, and two_pass pushed the chisel off; hunt28_5). A node under the edge line of a block's bottom and
+    side (on the side face's plane) takes the bottom face, whole (it took a sideways share; hunt28_3)."""
+    t = np.tan(np.radians(10.0))
+    chisel = np.array([[[0, 0, 0], [0, 0, 1], [0, 1, 1], [0, 1, 0]],            # vertical face, outward -x
+                       [[0, 0, 0], [0, 1, 0], [1, 1, 1 / t], [1, 0, 1 / t]]], dtype=float)  # bevel, 80 degrees
+    key = np.array([[0, 1, 2, 3], [0, 1, 4, 5]])
+    up = np.array([[0.0, 0.0, 1.0]])
+    beside = np.array([[-0.03, 0.5, 0.0]])
+    plain = closest_faces(beside, chisel, "quad", key, 0.2)
+    assert plain["face"][0] >= 0 and plain["share"][0] == 2          # the tie of the two faces, without normals
+    assert closest_faces(beside, chisel, "quad", key, 0.2, normal=up)["face"][0] == -1
+    # with an edge band the weight fades as past an edge: whole up to a tenth of it, none beyond it
+    for band, weight in ((0.02, 0.0), (0.3, 1.0), (0.1, (0.1 - 0.03) / 0.09)):
+        out = closest_faces(beside, chisel, "quad", key, 0.2, band=np.array([band]), normal=up)
+        assert out["edge_factor"][0] == pytest.approx(weight, abs=1e-6) and (out["face"][0] >= 0) == (weight > 0)
+    block = np.array([[[0, 0, 0], [0, 1, 0], [1, 1, 0], [1, 0, 0]],               # bottom, outward -z
+                      [[0, 0, 0], [0, 0, 1], [0, 1, 1], [0, 1, 0]]], dtype=float)  # side x = 0, outward -x
+    edge = closest_faces(np.array([[0.0, 0.5, 0.0]]), block, "quad", key, 0.2, normal=up)
+    assert edge["face"][0] == 0 and edge["share"][0] == 1 and len(edge["extra"]["point"]) == 0
+
+
 def test_tie_rule_on_a_kinked_ridge():
     """Over the ridge of a roof, the normal shall come from the face with the smallest key, whatever the order."""
     x = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [-1, 0, -1], [-1, 1, -1], [2, 0, -1], [2, 1, -1]],

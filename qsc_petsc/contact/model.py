@@ -761,8 +761,14 @@ class ContactModel:
                 what = (f"slid {slid:.3g} m = {slid / pd['h_eff']:.2g} h_eff in this step" if share <= UNFACED_WARNING
                         else f"left nodes that carry {share:.0%} of its normal force facing no part of the other "
                              f"surface")
+                # a knife's edge whose faces turn more than 84 degrees from the other surface faces none of it
+                # (search.FACING) however it slides (hunt28_5)
+                shape = ("" if share <= UNFACED_WARNING else
+                         " (or the surfaces meet at an edge whose faces turn more than 84 degrees from the other "
+                         "surface, which no search pairs: then the rows of the edge's own nodes hold it)")
                 lines.append(f"{name}: the contact {what}; finite sliding keeps the rows searched at the step's "
-                             f"start, whose error grows with that: use more load steps or sliding = \"large\"")
+                             f"start, whose error grows with that: use more load steps or sliding = \"large\""
+                             f"{shape}")
             slip = max(entry["max_slip_slave"], entry["max_slip_master"])
             if spec.sliding == "small" and slip > SLIP_WARNING * pd["h_eff"] and name not in self.slip_warned:
                 self.slip_warned.add(name)

@@ -205,8 +205,18 @@ def found_entries(found, names):
 
 def closest_faces(points, face_xyz, face_type, face_key, radius, band=None, keep=None, keep_within=None,
                   normal=None):
-    """The face each point projects on: the nearest within radius among the faces turned towards it (normal (p, 3),
-    the points' outward unit normals: FACING; None: all faces), ties broken by the smallest face_key row.
+    """The face each point projects on: the nearest within radius, ties broken by the smallest face_key row; with
+    normal (p, 3), the points' outward unit normals, only faces turned towards the point (FACING) take it:
+
+    * a point whose nearest faces (the winner and those it shares with) all turn towards it keeps them;
+    * one in front of a nearest face turned away from it (signed gap above the tie tolerance) is outside the
+      other body beside that face: it takes the nearest among the faces turned towards it with a weight that
+      fades over the edge band (band) as that gap grows, and none past it (none at all without band). A plate
+      node beside a chisel's edge, as near to its vertical face (in front of it) as to its bevel (behind that
+      one's plane), read the bevel's plane as a penetration once the vertical face was left out, and two_pass
+      pushed the chisel off 3.7x the force (hunt28_5);
+    * any other (on or behind a face turned away: a node on the other's convex edge line, one past a thin
+      plate's middle) takes the nearest among the faces turned towards it.
 
     points (p, 3); face_xyz (m, nv, 3); face_key (m, k) int64, e.g. each face's
     sorted global vertex ids (partition independent). Returns a dict of (p, ...)
@@ -238,6 +248,73 @@ def closest_faces(points, face_xyz, face_type, face_key, radius, band=None, keep
     that the choice between the faces of a kink does not swing from one search to the next. out["key"]: the
     keys of the faces chosen (-1 rows where none or shared), for the next search's keep.
     """
+    if normal is None:
+        out = _closest(points, face_xyz, face_type, face_key, radius, band, keep, keep_within)
+        out.pop("nearest")
+        return out
+    points = np.asarray(points, dtype=float).reshape(-1, 3)
+    face_xyz = np.asarray(face_xyz, dtype=float)
+    p = len(points)
+    out = _closest(points, face_xyz, face_type, face_key, radius, band, keep, keep_within)
+    if p == 0 or len(face_xyz) == 0:
+        return out
+    normal = np.asarray(normal, dtype=float).reshape(-1, 3)
+    centroid = face_normal_at(face_type, face_xyz, np.broadcast_to(fem.CENTROID[face_type], (len(face_xyz), 2)))
+    size = fem.face_size(face_xyz)
+    extra = out["extra"]
+    nearest = out.pop("nearest")
+    has = nearest >= 0
+    # per point: whether a nearest face turns away, and how far the point lies in front of such a face
+    away, front = np.zeros(p, dtype=bool), np.full(p, -np.inf)
+    f = nearest[has]
+    turned = facing_pairs(normal[has], centroid[f])
+    away[has] = ~turned
+    front[has] = np.where(turned, -np.inf, out["signed_gap"][has] - TIE_TOL * size[f])
+    xt = facing_pairs(normal[extra["point"]], centroid[extra["face"]])
+    np.logical_or.at(away, extra["point"], ~xt)
+    np.maximum.at(front, extra["point"], np.where(xt, -np.inf, extra["signed_gap"] - TIE_TOL * size[extra["face"]]))
+    # in front of it: a weight that fades over the edge band as a point past an edge does (1 up to EDGE_FULL band,
+    # 0 from band on), so that a node beside the other's side face takes what it took when the surface held no
+    # side (a cube slid past the other's edge: the same rows with whole skins as with the touching faces)
+    weight = np.ones(p)
+    ahead = front > 0.0
+    if band is None:
+        weight[ahead] = 0.0
+    else:
+        b = np.broadcast_to(band, (p,))[ahead]
+        weight[ahead] = np.clip((b - front[ahead]) / ((1.0 - EDGE_FULL) * b), 0.0, 1.0)
+    redo = np.flatnonzero(away & (weight > 0.0))
+    drop = np.flatnonzero(away)
+    out["face"][drop] = -1
+    out["key"][drop] = -1
+    out["share"][drop] = 1.0
+    out["edge_factor"][drop] = 0.0
+    keep_extra = ~np.isin(extra["point"], drop)
+    out["extra"] = {name: values[keep_extra] for name, values in extra.items()}
+    if len(redo):
+        sub = _closest(points[redo], face_xyz, face_type, face_key, radius,
+                       None if band is None else np.broadcast_to(band, (p,))[redo],
+                       None if keep is None else np.asarray(keep)[redo],
+                       None if keep_within is None else np.broadcast_to(keep_within, (p,))[redo],
+                       (normal[redo], centroid))
+        sub.pop("nearest")
+        sub["edge_factor"] = np.minimum(sub["edge_factor"], weight[redo])
+        gone = sub["edge_factor"] <= 0.0
+        sub["face"][gone], sub["key"][gone] = -1, -1
+        for name, values in sub.items():
+            if name != "extra":
+                out[name][redo] = values
+        sx = sub["extra"]
+        sx["point"] = redo[sx["point"]]
+        sx["edge_factor"] = np.minimum(sx["edge_factor"], weight[sx["point"]])
+        kept = ~np.isin(sx["point"], redo[gone])
+        out["extra"] = {name: np.concatenate([out["extra"][name], sx[name][kept]]) for name in out["extra"]}
+    return out
+
+
+def _closest(points, face_xyz, face_type, face_key, radius, band=None, keep=None, keep_within=None, facing=None):
+    """closest_faces over the faces given, or, with facing ((p, 3) point normals, (m, 3) face centroid normals),
+    over those turned towards each point; out["nearest"]: the winner's index whatever its edge band (-1: none)."""
     points = np.asarray(points, dtype=float).reshape(-1, 3)
     face_xyz = np.asarray(face_xyz, dtype=float)
     nv = fem.FACE_NODES[face_type]
@@ -255,15 +332,12 @@ def closest_faces(points, face_xyz, face_type, face_key, radius, band=None, keep
            "key": np.full((p, face_key.shape[1]), -1, dtype=np.int64), "share": np.ones(p)}
     out["extra"] = {name: values[:0] for name, values in out.items() if name not in ("key", "share")}
     out["extra"]["point"] = np.zeros(0, dtype=np.int64)
+    out["nearest"] = np.full(p, -1, dtype=np.int64)
     if p == 0 or len(face_xyz) == 0:
         return out
 
     margin = TIE_TOL * float(fem.face_size(face_xyz).max()) + (0.0 if keep is None else
                                                                 np.broadcast_to(keep_within, (p,)))
-    facing = None
-    if normal is not None:
-        centroid = np.broadcast_to(fem.CENTROID[face_type], (len(face_xyz), 2))
-        facing = (np.asarray(normal, dtype=float).reshape(-1, 3), face_normal_at(face_type, face_xyz, centroid))
     pi, fi = _nearest_candidates(points, face_xyz, radius, np.broadcast_to(margin, (p,)), facing)
     proj = project_on_faces(points[pi], face_xyz[fi], face_type)
     near = proj.distance <= radius
@@ -295,6 +369,7 @@ def closest_faces(points, face_xyz, face_type, face_key, radius, band=None, keep
     for name, values in entry.items():
         out[name][who] = values[first]
     out["face"][who] = np.where(entry["edge_factor"][first] > 0.0, fi[first], -1)
+    out["nearest"][who] = fi[first]
     # the other faces at the winner's distance share the point's weight with it (_shared)
     out["share"], out["extra"] = _shared(p, pi, fi, entry, is_first, level, out["face"])
     # a shared point keeps no face: the tie rule's winner is not its mirror image's (a Gauss point on an edge of
