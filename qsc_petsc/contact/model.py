@@ -617,7 +617,7 @@ class ContactModel:
             spec = pd["spec"]
             raise SceneError(f"contact[{pd['index']}]: no node of {spec.slave!r} or {spec.master!r} is within the "
                              f"search distance ({pd['radius']:.3g} m = search_distance x element size) of the "
-                             f"other surface and turned towards it (outward normals within 84 degrees of facing "
+                             f"other surface and turned towards it (outward normals within 70 degrees of facing "
                              f"each other); increase contact[{pd['index']}].search_distance or check the geometry "
                              f"and the surfaces' faces")
         return found
@@ -761,10 +761,10 @@ class ContactModel:
                 what = (f"slid {slid:.3g} m = {slid / pd['h_eff']:.2g} h_eff in this step" if share <= UNFACED_WARNING
                         else f"left nodes that carry {share:.0%} of its normal force facing no part of the other "
                              f"surface")
-                # a knife's edge whose faces turn more than 84 degrees from the other surface faces none of it
+                # a knife's edge whose faces turn more than 70 degrees from the other surface faces none of it
                 # (search.FACING) however it slides (hunt28_5)
                 shape = ("" if share <= UNFACED_WARNING else
-                         " (or the surfaces meet at an edge whose faces turn more than 84 degrees from the other "
+                         " (or the surfaces meet at an edge whose faces turn more than 70 degrees from the other "
                          "surface, which no search pairs: then the rows of the edge's own nodes hold it)")
                 lines.append(f"{name}: the contact {what}; finite sliding keeps the rows searched at the step's "
                              f"start, whose error grows with that: use more load steps or sliding = \"large\""

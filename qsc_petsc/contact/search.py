@@ -19,13 +19,13 @@ EDGE_FULL = 0.1
 # a face may cover this many grid cells on average before the cells are made coarser
 _MAX_CELLS_PER_FACE = 27
 # a point meets a face only if the face is turned towards it: n_point . n_face <= FACING (outward normals, the
-# face's at its centroid), i.e. the two within about 84 degrees of facing each other. A surface may hold faces
+# face's at its centroid), i.e. the two within 70 degrees of facing each other. A surface may hold faces
 # that never meet the other one: a thin body's whole skin (the far side, within the search distance, read the
 # body's thickness as a gap or a penetration), the sides beside a punch's face (their Gauss points, projected
 # on the block with a gap of their height, opened the rows of the punch's edge), or a master's side face at a
 # convex edge (a slave node on the edge line, shared with it, was held sideways). Perpendicular faces are out
 # too: seen edge-on they meet nothing (hunt28_3).
-FACING = -0.1
+FACING = -0.342            # -cos(70 degrees)
 
 
 def _empty_pairs():
