@@ -351,6 +351,23 @@ def test_a_point_in_front_of_a_face_turned_away_meets_none():
     assert edge["face"][0] == 0 and edge["share"][0] == 1 and len(edge["extra"]["point"]) == 0
 
 
+def test_a_side_face_meets_no_plate_tilted_below_the_facing_angle():
+    """A Gauss point on a punch's side (outward +x) just above a plate tilted 10 degrees towards it (outward normal
+    10 degrees off +z, towards -x): their normals are 80 degrees from facing, so the point meets no face. At 84
+    degrees (FACING -0.1) it did: a plate bent 6 degrees beside a punch opened the punch's edge rows through its
+    sides' points (6.6 % of the force; hunt28_6)."""
+    a = np.radians(10.0)
+    plate = np.array([[[-0.5, 0, 0], [0.5, 0, 0], [0.5, 1, 0], [-0.5, 1, 0]]], dtype=float)      # outward +z
+    plate = plate @ np.array([[np.cos(a), 0, -np.sin(a)], [0, 1, 0], [np.sin(a), 0, np.cos(a)]]).T   # tilted
+    from qsc_petsc.contact.geometry import face_normal_at
+    n = face_normal_at("quad", plate, np.zeros((1, 2)))[0]
+    assert n[2] == pytest.approx(np.cos(a)) and n[0] < 0
+    side = np.array([[0.0, 0.5, 0.02]])
+    assert closest_faces(side, plate, "quad", np.array([[0, 1, 2, 3]]), 0.2)["face"][0] == 0
+    assert closest_faces(side, plate, "quad", np.array([[0, 1, 2, 3]]), 0.2, normal=np.array([[1.0, 0, 0]]))[
+        "face"][0] == -1
+
+
 def test_tie_rule_on_a_kinked_ridge():
     """Over the ridge of a roof, the normal shall come from the face with the smallest key, whatever the order."""
     x = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [-1, 0, -1], [-1, 1, -1], [2, 0, -1], [2, 1, -1]],
