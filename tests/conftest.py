@@ -5,6 +5,7 @@ import shutil
 import tempfile
 from pathlib import Path
 
+import numpy as np
 import pytest
 from mpi4py import MPI
 
@@ -53,3 +54,31 @@ def scene_without_petsc(folder, petsc="", comm=MPI.COMM_WORLD):
 def all_close(comm, ok):
     """True on every rank iff ok on every rank (assert only on such values under MPI)."""
     return comm.allreduce(bool(ok), op=MPI.LAND)
+
+
+def write_gmsh(path, points, cells, element, surfaces):
+    """A mesh file in gmsh 2.2 format: cells of one element type ("hex" or "tet") and the named physical surfaces
+    {name: faces (k, nv) of vertex indices}."""
+    import meshio
+    face = {"hex": "quad", "tet": "triangle"}[element]
+    blocks = [({"hex": "hexahedron", "tet": "tetra"}[element], cells)]
+    tags, names = [np.full(len(cells), 100)], {"solid": np.array([100, 3])}
+    for tag, (name, faces) in enumerate(surfaces.items(), start=1):
+        blocks.append((face, faces))
+        tags.append(np.full(len(faces), tag))
+        names[name] = np.array([tag, 2])
+    meshio.write(path, meshio.Mesh(points, blocks, cell_data={"gmsh:physical": tags, "gmsh:geometrical": tags},
+                                   field_data=names), file_format="gmsh22", binary=False)
+
+
+def write_gmsh_box(path, groups=None, cells=(2, 2, 2), element="tet", origin=(0.0, 0.0, 0.0), size=(1.0, 1.0, 1.0)):
+    """A generated box written as a gmsh 2.2 file (write_gmsh); groups maps a physical surface name to a box side
+    (None: every side under its own name). Returns the box (meshgen.box_mesh)."""
+    from qsc_petsc import fem
+    from qsc_petsc.meshgen import box_mesh
+    box = box_mesh(origin, size, cells, element)
+    groups = {side: side for side in box.surfaces} if groups is None else groups
+    write_gmsh(path, box.points, box.cells, element, {
+        name: fem.cell_faces(element, box.cells[box.surfaces[side][:, 0]], box.surfaces[side][:, 1])
+        for name, side in groups.items()})
+    return box

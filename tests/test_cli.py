@@ -18,6 +18,7 @@ from pathlib import Path
 import meshio
 import numpy as np
 import pytest
+from conftest import write_gmsh, write_gmsh_box
 from mpi4py import MPI
 
 from qsc_petsc import fem
@@ -103,20 +104,6 @@ def block_scene(folder, *, mesh=BOX, E="1000.0", fixed="zmin", extra=""):
     path = Path(folder) / "block.toml"
     path.write_text(BLOCK.format(mesh=mesh, E=E, fixed=fixed) + extra)
     return path
-
-
-def write_gmsh_box(path, groups, cells=(2, 2, 2)):
-    """A tet mesh of the unit cube in gmsh 2.2 format; groups maps a physical surface name to a box side."""
-    box = box_mesh((0.0, 0.0, 0.0), (1.0, 1.0, 1.0), cells, "tet")
-    blocks, tags, field_data = [("tetra", box.cells)], [np.full(len(box.cells), 100)], {"solid": np.array([100, 3])}
-    for tag, (name, side) in enumerate(groups.items(), start=1):
-        rows = box.surfaces[side]
-        blocks.append(("triangle", fem.cell_faces("tet", box.cells[rows[:, 0]], rows[:, 1])))
-        tags.append(np.full(len(rows), tag))
-        field_data[name] = np.array([tag, 2])
-    meshio.write(path, meshio.Mesh(box.points, blocks, cell_data={"gmsh:physical": tags, "gmsh:geometrical": tags},
-                                   field_data=field_data), file_format="gmsh22", binary=False)
-    return box
 
 
 def serial_only():
@@ -414,13 +401,7 @@ def test_a_body_in_unconnected_pieces_must_hold_each(tmp_path, ranks):
     cells = np.vstack([cube.cells, cube.cells + len(cube.points)])
     rows = cube.surfaces["zmin"]
     bottoms = fem.cell_faces("tet", cube.cells[rows[:, 0]], rows[:, 1])
-    blocks = [("tetra", cells), ("triangle", bottoms), ("triangle", bottoms + len(cube.points))]
-    tags = [np.full(len(cells), 100), np.full(len(bottoms), 1), np.full(len(bottoms), 2)]
-    meshio.write(tmp_path / "two.msh", meshio.Mesh(points, blocks, cell_data={"gmsh:physical": tags,
-                                                                               "gmsh:geometrical": tags},
-                                                   field_data={"base": np.array([1, 2]), "base2": np.array([2, 2]),
-                                                               "solid": np.array([100, 3])}),
-                 file_format="gmsh22", binary=False)
+    write_gmsh(tmp_path / "two.msh", points, cells, "tet", {"base": bottoms, "base2": bottoms + len(cube.points)})
     one = block_scene(tmp_path, mesh='type = "file", path = "two.msh"', fixed="base", extra=PRESSED.replace(
         "blk.zmax", "blk.boundary"))
     code, out = qsc(["check", one], ranks, cwd=tmp_path)

@@ -4,7 +4,7 @@ as one, and the pressure field where a die and a pair press one surface (a helpe
 import meshio
 import numpy as np
 import pytest
-from conftest import run_scene
+from conftest import run_scene, write_gmsh
 
 from qsc_petsc import fem
 from qsc_petsc.meshgen import box_mesh
@@ -122,19 +122,13 @@ def test_a_die_takes_its_surfaces_as_one(tmp_path):
     group's area only and read twice the pressure (20 Pa under 10), the die's area 0.93. The die's surfaces are
     now one surface: the same answer as the unsplit face."""
     box = box_mesh((0.0, 0.0, 0.0), (1.0, 1.0, 1.0), (4, 4, 4), "tet")
-    blocks, tags, field = [("tetra", box.cells)], [np.full(len(box.cells), 100)], {"solid": np.array([100, 3])}
     bottom = fem.cell_faces("tet", box.cells[box.surfaces["zmin"][:, 0]], box.surfaces["zmin"][:, 1])
     left = box.points[bottom].mean(axis=1)[:, 0] < 0.5
     groups = {"bot_a": bottom[left], "bot_b": bottom[~left], "bottom": bottom}
     for side in ("xmin", "ymin", "zmax"):
         rows = box.surfaces[side]
         groups[side] = fem.cell_faces("tet", box.cells[rows[:, 0]], rows[:, 1])
-    for tag, (name, faces) in enumerate(groups.items(), start=1):
-        blocks.append(("triangle", faces))
-        tags.append(np.full(len(faces), tag))
-        field[name] = np.array([tag, 2])
-    meshio.write(tmp_path / "split.msh", meshio.Mesh(box.points, blocks, cell_data={
-        "gmsh:physical": tags, "gmsh:geometrical": tags}, field_data=field), file_format="gmsh22", binary=False)
+    write_gmsh(tmp_path / "split.msh", box.points, box.cells, "tet", groups)
     text = """name = "split"
 [[bodies]]
 name = "b"

@@ -11,8 +11,8 @@ import h5py
 import meshio
 import numpy as np
 import pytest
-from conftest import CONFIGS, run_scene
-from test_cli import MPIRUN, qsc, write_gmsh_box
+from conftest import CONFIGS, run_scene, write_gmsh_box
+from test_cli import MPIRUN, qsc
 
 from qsc_petsc.scene import load_scene
 

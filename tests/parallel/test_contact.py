@@ -5,12 +5,10 @@ ranks, and on 3 ranks some rank owns no contact surface); assertions use all-red
 
 import numpy as np
 import pytest
-from conftest import CONFIGS, all_close, run_scene
+from conftest import CONFIGS, all_close, run_scene, write_gmsh_box
 from mpi4py import MPI
 
-from qsc_petsc import fem
 from qsc_petsc.errors import SceneError
-from qsc_petsc.meshgen import box_mesh
 
 FORMULATIONS = ["master_slave", "two_pass", "quasi_symmetric"]
 
@@ -99,25 +97,12 @@ pc_factor_mat_solver_type = "mumps"
 """
 
 
-def write_box_file(path, origin, size, cells):
-    """A hex box as a gmsh 2.2 file whose physical surfaces are its sides (a file body also gets "boundary")."""
-    box = box_mesh(origin, size, cells, "hex")
-    blocks, tags, names = [("hexahedron", box.cells)], [np.full(len(box.cells), 100)], {"solid": np.array([100, 3])}
-    for tag, (side, rows) in enumerate(box.surfaces.items(), start=1):
-        blocks.append(("quad", fem.cell_faces("hex", box.cells[rows[:, 0]], rows[:, 1])))
-        tags.append(np.full(len(rows), tag))
-        names[side] = np.array([tag, 2])
-    import meshio
-    meshio.write(path, meshio.Mesh(box.points, blocks, cell_data={"gmsh:physical": tags, "gmsh:geometrical": tags},
-                                   field_data=names), file_format="gmsh22", binary=False)
-
-
 def skin_runs(comm, folder, punch_cells, formulation, integration):
     """The punch on the plate (one element thick) named by the touching faces, then by both bodies' whole skins:
     per description, this rank's owned displacements, the last step's summary and its pair's entry."""
     if comm.rank == 0:
-        write_box_file(str(folder / "plate.msh"), (0.0, 0.0, 0.0), (1.0, 1.0, 0.2), (5, 5, 1))
-        write_box_file(str(folder / "punch.msh"), (0.3, 0.3, 0.2), (0.4, 0.4, 0.4), punch_cells)
+        write_gmsh_box(folder / "plate.msh", None, (5, 5, 1), "hex", (0.0, 0.0, 0.0), (1.0, 1.0, 0.2))
+        write_gmsh_box(folder / "punch.msh", None, punch_cells, "hex", (0.3, 0.3, 0.2), (0.4, 0.4, 0.4))
     out = []
     for k, (slave, master) in enumerate((("punch.zmin", "plate.zmax"), ("punch.boundary", "plate.boundary"))):
         if comm.rank == 0:
@@ -199,7 +184,7 @@ def test_a_die_on_a_whole_skin_presses_its_facing_face(comm, mpi_tmp, condition)
     die on its top face, with the top's area: the sides' nodes took rows and the edge nodes the sides' areas
     (contact area 1.5 for a 1 m2 face)."""
     if comm.rank == 0:
-        write_box_file(str(mpi_tmp / "blk.msh"), (0.0, 0.0, 0.0), (1.0, 1.0, 0.25), (4, 4, 1))
+        write_gmsh_box(mpi_tmp / "blk.msh", None, (4, 4, 1), "hex", (0.0, 0.0, 0.0), (1.0, 1.0, 0.25))
     out = []
     for k, surface in enumerate(("blk.zmax", "blk.boundary")):
         if comm.rank == 0:
