@@ -109,38 +109,27 @@ def _nodal_sums(mesh, faces, values, nodes, template):
     return out
 
 
-def nodal_normals(mesh, S, x):
-    """The area-weighted outward unit normals of S's owned nodes with the local vertices at x (collective): the
-    faces' centroid normals weighted by the nodes' tributary areas on them."""
+def nodal_normals(mesh, S, x, by="area"):
+    """The outward unit normals of S's owned nodes with the local vertices at x (collective): the faces' centroid
+    normals weighted by the nodes' tributary areas on them (by="area": S.normal, the tractions' normal), or by the
+    faces' angles at the node (by="angle": the angle-weighted pseudo-normal by which a node faces another surface,
+    search.FACING). The angles depend on the surface's shape, not on its mesh: the area-weighted normal of a whole
+    skin's edge node leaned past the facing threshold when the sides' faces were large beside the contact face's
+    (a punch one element tall, a thin wall on its edge: the node met no face, lost its row and sank in; hunt28_4),
+    the angles put it at 45 degrees on any box edge, 55 at a corner."""
     xf = x[S.faces]
     if len(S.faces):
-        nodal = fem.face_nodal_areas(mesh.face_type, xf)
         normal, _ = fem.face_normals(mesh.face_type, xf, fem.CENTROID[mesh.face_type][None, :])
+        if by == "area":
+            weight = fem.face_nodal_areas(mesh.face_type, xf)
+        else:
+            before, after = np.roll(xf, 1, axis=1) - xf, np.roll(xf, -1, axis=1) - xf
+            cos = np.einsum("kvi,kvi->kv", before, after) / (np.linalg.norm(before, axis=2) *
+                                                             np.linalg.norm(after, axis=2))
+            weight = np.arccos(np.clip(cos, -1.0, 1.0))
     else:
-        nodal, normal = np.zeros((0, S.faces.shape[1])), np.zeros((0, 1, 3))
-    nvec = _nodal_sums(mesh, S.faces, nodal[:, :, None] * normal[:, 0, None, :], S.nodes, S.template)
-    nrm = np.linalg.norm(nvec, axis=1)
-    return nvec / np.where(nrm > 0, nrm, 1.0)[:, None]
-
-
-def facing_normals(mesh, S, x):
-    """The outward unit normals by which S's owned nodes face another surface (search.FACING), with the local
-    vertices at x (collective): the faces' centroid normals weighted by their angles at the node (the angle-weighted
-    pseudo-normal), which depend on the surface's shape, not on its mesh. The area-weighted normal of a whole skin's
-    edge node leaned past the threshold when the sides' faces were large beside the contact face's (a punch one
-    element tall, a thin wall on its edge: the node met no face, lost its row and sank in; hunt28_4); the angles
-    put it at 45 degrees on any box edge, 55 at a corner."""
-    xf = x[S.faces]
-    nv = S.faces.shape[1]
-    if len(S.faces):
-        normal, _ = fem.face_normals(mesh.face_type, xf, fem.CENTROID[mesh.face_type][None, :])
-        before, after = np.roll(xf, 1, axis=1) - xf, np.roll(xf, -1, axis=1) - xf
-        cos = np.einsum("kvi,kvi->kv", before, after) / (np.linalg.norm(before, axis=2) *
-                                                         np.linalg.norm(after, axis=2))
-        angle = np.arccos(np.clip(cos, -1.0, 1.0))
-    else:
-        angle, normal = np.zeros((0, nv)), np.zeros((0, 1, 3))
-    nvec = _nodal_sums(mesh, S.faces, angle[:, :, None] * normal[:, 0, None, :], S.nodes, S.template)
+        weight, normal = np.zeros((0, S.faces.shape[1])), np.zeros((0, 1, 3))
+    nvec = _nodal_sums(mesh, S.faces, weight[:, :, None] * normal[:, 0, None, :], S.nodes, S.template)
     nrm = np.linalg.norm(nvec, axis=1)
     return nvec / np.where(nrm > 0, nrm, 1.0)[:, None]
 
@@ -210,19 +199,16 @@ def _search_pass(mesh, T, X, U, radius, points, memo=None, weigh=None):
     return quadrature.found_pass(points, found, gv, fx, fsize), found["face"] >= 0, found
 
 
-def project_pass(mesh, S, T, X, U, radius, memo=None, which=None):
+def project_pass(mesh, S, T, X, U, radius, memo=None, which=None, weighted=True):
     """Owned nodes of S (those of the mask `which`, if given) projected on faces of T (local and gathered): a
     rows.Pass, the found mask, the search. Each node weighs its tributary area on the faces turned towards the face
-    it found (facing_areas: found["area"], with their normal found["surface_normal"])."""
+    it found (facing_areas); weighted=False leaves the Pass's weights S's areas, for callers that read the search
+    alone."""
     which = slice(None) if which is None else which
     v = S.nodes[which]
     points = {"x_cur": X[v] + U[v], "x_ref": X[v], "node": mesh.gvert[v], "size": S.size[which],
-              "normal": facing_normals(mesh, S, X + U)[which]}
-
-    def weigh(found):
-        found["area"], found["surface_normal"] = facing_areas(mesh, S, X, U, which, found)
-        return found["area"]
-
+              "weight": S.area[which], "normal": nodal_normals(mesh, S, X + U, by="angle")[which]}
+    weigh = (lambda found: facing_areas(mesh, S, X, U, which, found)[0]) if weighted else None
     return _search_pass(mesh, T, X, U, radius, points, memo, weigh)
 
 
@@ -421,7 +407,7 @@ class ContactModel:
                 # body's whole skin as the die's surface gave the nodes of its sides rows and the edge nodes the
                 # sides' areas (the contact area 1.5 for a 1 m2 face)
                 S = dd["surface"]
-                turned = facing_pairs(facing_normals(mesh, S, X + U), n)
+                turned = facing_pairs(nodal_normals(mesh, S, X + U, by="angle"), n)
                 near = (-_die_depth(dd, X, U, t) <= dd["radius"]) & turned
                 dd["near"] = near                   # the nodes with rows (missed)
                 toward = {"face": np.zeros(len(v), dtype=np.int64), "normal": np.tile(n, (len(v), 1))}
@@ -460,7 +446,7 @@ class ContactModel:
                 held = W[_owned_rows(mesh, S.nodes)] > 0
                 if not self.comm.allreduce(bool(held.any()), op=MPI.LOR):
                     continue                 # a side without rows (master_slave's master)
-                found = project_pass(mesh, S, T, X, U, pd["radius"], which=~held)[2]
+                found = project_pass(mesh, S, T, X, U, pd["radius"], which=~held, weighted=False)[2]
                 tol = self.scene.solver.active_set_tolerance * pd["h_eff"]
                 count += int(((found["edge_factor"] == 1.0) & (-found["signed_gap"] > tol)).sum())
             count = self.comm.allreduce(count, op=MPI.SUM)
@@ -652,7 +638,7 @@ class ContactModel:
                      "gap_change": _finite_or_none(self.searches[term.name]["gap_change"])}
             mean_pen, pressed_unfaced, unfaced_force, step_slip = {}, 0, {}, 0.0
             for side, S, T in (("slave", pd["slave"], pd["master"]), ("master", pd["master"], pd["slave"])):
-                _, ok, found = project_pass(mesh, S, T, X, U, pd["radius"])
+                _, ok, found = project_pass(mesh, S, T, X, U, pd["radius"], weighted=False)
                 area, normal = self._pressed_areas(S, X, U, found, F[_owned_rows(mesh, S.nodes)])
                 v = S.nodes[ok]
                 h = -found["signed_gap"][ok]          # penetration in the current configuration
@@ -785,7 +771,7 @@ class ContactModel:
         key = (pd["index"], side)
         if key not in self.faced_at_start:
             _, ok0, found0 = project_pass(self.mesh, S, T, self.mesh.coords, np.zeros_like(self.mesh.coords),
-                                          pd["radius"])
+                                          pd["radius"], weighted=False)
             self.faced_at_start[key] = (ok0, found0["target_ref"])
         if since == "report":
             ok0, start = self.faced_last.get(key, self.faced_at_start[key])
