@@ -501,8 +501,10 @@ CONTACT = Table({
     "gauss_points": Int("Gauss points per direction on each face with integration = \"gauss\" (a triangle "
                         "gets a rule symmetric in its vertices, at least n^2 points exact to degree 2n - 2: 1, 6, 12, "
                         "16 points for n = 1-4, 3 n^2 above).", ge=1, le=10, default=3),
-    "penalty": Float("Dimensionless alpha of the penalty eps_n = alpha * E_eff / h_eff (at most 1e10; tighter "
-                     "contact: enforcement = \"augmented_lagrangian\").", gt=0, le=MAX_PENALTY, default=1e4),
+    "penalty": Float("Dimensionless alpha of the penalty eps_n = alpha * E_eff / h_eff (E_eff: the smaller Young's "
+                     "modulus; h_eff: the smaller of the two surfaces' mean face sizes over the faces that can touch "
+                     "the other surface; at most 1e10; tighter contact: enforcement = \"augmented_lagrangian\").",
+                     gt=0, le=MAX_PENALTY, default=1e4),
     "enforcement": Choice(("penalty", "augmented_lagrangian"), "How the constraint is enforced.", default="penalty"),
     "augmented_tolerance": Float("Relative change of the multipliers that ends the augmented Lagrangian loop "
                                  "(relative to the pressure of a strain of 1e-6 where the multipliers are smaller).",
@@ -544,7 +546,8 @@ DIE = Table({
                    unit="m"),
     "surfaces": ListOf(SurfaceRef(), "Body surfaces the die can touch.", min_len=1),
     "condition": Choice(("frictionless", "sticking"), "Tangential condition on the die face.", default="frictionless"),
-    "penalty": Float("Dimensionless alpha of the penalty eps_n = alpha * E / h (at most 1e10).", gt=0,
+    "penalty": Float("Dimensionless alpha of the penalty eps_n = alpha * E / h (h: the mean size of the faces turned "
+                     "towards the die; at most 1e10).", gt=0,
                      le=MAX_PENALTY, default=1e4),
     "search_distance": Float("Largest gap that still makes a contact row, in units of the body's element size.",
                              gt=0, default=1.0, unit="h"),

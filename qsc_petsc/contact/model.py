@@ -20,8 +20,9 @@ from ..mesh import on_all
 from ..solver import FLOOR_STRAIN, ConstraintTerm, array_digest
 from . import quadrature
 from . import rows as row_builders
+from .geometry import _dot
 from .penalty import gate_positions
-from .search import closest_faces, facing_pairs
+from .search import FACING, closest_faces, facing_pairs
 
 # the edge band (search.closest_faces) of a nodal or Gauss point, as a fraction of its own element size: a point
 # that has slid past the opposite surface's edge (by more than it is off the face's plane) keeps its whole row for
@@ -274,6 +275,64 @@ def integration_pass(mesh, spec, S, T, X, U, radius, memo=None):
     return project_pass(mesh, S, T, X, U, radius, memo)[0]
 
 
+def _face_geometry(mesh, S):
+    """Per local face of S in the reference configuration (k, 13): centroid, outward unit normal there, size,
+    box corners (low, high)."""
+    xf = mesh.coords[S.faces]
+    if not len(xf):
+        return np.zeros((0, 13))
+    normal, _ = fem.face_normals(mesh.face_type, xf, fem.CENTROID[mesh.face_type][None, :])
+    return np.hstack([xf.mean(axis=1), normal[:, 0], fem.face_size(xf)[:, None], xf.min(axis=1), xf.max(axis=1)])
+
+
+def _mean_over(comm, sizes, fallback):
+    """The mean of sizes over all ranks, or fallback where no rank has any (collective)."""
+    count = comm.allreduce(len(sizes), op=MPI.SUM)
+    return comm.allreduce(float(np.sum(sizes)), op=MPI.SUM) / count if count else fallback
+
+
+def _ahead(faces, lo, hi, tol):
+    """Which faces have part of the box [lo, hi] in front of them (their centroid's tangent plane, within tol)."""
+    corners = np.stack(np.meshgrid(*zip(lo, hi), indexing="ij"), axis=-1).reshape(-1, 3)
+    return np.einsum("kci,ki->kc", corners[None, :, :] - faces[:, None, :3], faces[:, 3:6]).max(axis=1) >= -tol
+
+
+def _touching(own, them, chunk=1 << 20):
+    """Which of own's faces (rows of _face_geometry) can touch one of them's: turned towards it (search.FACING),
+    each lying in front of the other (centroids, within the larger face's size: a conforming or slightly
+    overlapping pair counts). Faces with no part of the other surface's box in front are out before the pairs
+    are tested (a box's back and sides)."""
+    out = np.zeros(len(own), dtype=bool)
+    if not len(own) or not len(them):
+        return out
+    largest = float(them[:, 6].max())
+    mine = np.flatnonzero(_ahead(own, them[:, 7:10].min(axis=0), them[:, 10:13].max(axis=0), own[:, 6] + largest))
+    them = them[_ahead(them, own[:, 7:10].min(axis=0), own[:, 10:13].max(axis=0), them[:, 6] + own[:, 6].max())]
+    # per pair (s, m): n_s . n_m, (c_m - c_s) . n_s and (c_s - c_m) . n_m as matrix products
+    offset_them = _dot(them[:, :3], them[:, 3:6])
+    step = max(1, chunk // max(len(them), 1))
+    for first in range(0, len(mine) if len(them) else 0, step):
+        a = own[mine[first:first + step]]
+        tol = np.maximum(a[:, 6, None], them[None, :, 6])
+        ok = ((a[:, 3:6] @ them[:, 3:6].T <= FACING)
+              & (a[:, 3:6] @ them[:, :3].T - _dot(a[:, :3], a[:, 3:6])[:, None] >= -tol)
+              & (a[:, :3] @ them[:, 3:6].T - offset_them[None, :] >= -tol))
+        out[mine[first:first + step]] = ok.any(axis=1)
+    return out
+
+
+def touching_sizes(mesh, S, M):
+    """The mean sizes of the faces of S and of M that can touch the other surface (_touching; collective). A
+    surface that holds more than its touching faces (a body's whole skin: a punch's thin side faces, a plate's
+    far side) sets the penalty and the search's reach by the faces that touch, not by all of them (hunt28_6 F2: a
+    punch's thin sides took the reach below the gap); one with none such (a knife's edge) by all its faces."""
+    comm = mesh.comm
+    own = [_face_geometry(mesh, S), _face_geometry(mesh, M)]
+    every = [np.concatenate(comm.allgather(g)) for g in own]
+    return [_mean_over(comm, own[i][_touching(own[i], every[1 - i]), 6], surface.mean_size)
+            for i, surface in enumerate((S, M))]
+
+
 def contact_pairs_data(mesh, scene, template):
     """Surfaces, penalty scale and search radius of every contact pair."""
     pairs = []
@@ -281,7 +340,7 @@ def contact_pairs_data(mesh, scene, template):
         S = surface_data(mesh, pair.slave, template)
         M = surface_data(mesh, pair.master, template)
         E = min(scene.bodies[S.body].material.youngs_modulus, scene.bodies[M.body].material.youngs_modulus)
-        h_eff = min(S.mean_size, M.mean_size)
+        h_eff = min(touching_sizes(mesh, S, M))
         pairs.append({"index": i, "spec": pair, "slave": S, "master": M, "h_eff": h_eff,
                       "eps_n": pair.penalty * E / h_eff, "radius": pair.search_distance * h_eff,
                       "memo": {"slave": {}, "master": {}, "master_nodes": {}}})     # faces kept (_search_pass)
@@ -295,7 +354,10 @@ def die_data(mesh, scene, template):
         # the die's surfaces as one: a node on two of them (a face split into groups) has its whole area, not
         # the first-listed one's (the seam read twice the pressure)
         whole = surfaces[0] if len(surfaces) == 1 else surface_data(mesh, die.surfaces, template)
-        h = min(s.mean_size for s in surfaces)
+        # the faces turned towards the die (search.FACING) set its element size, as a pair's touching faces do
+        n = np.asarray(die.normal, dtype=float) / np.linalg.norm(die.normal)
+        h = min(_mean_over(mesh.comm, g[facing_pairs(g[:, 3:6], n[None, :]), 6], s.mean_size)
+                for s, g in ((s, _face_geometry(mesh, s)) for s in surfaces))
         E = min(scene.bodies[s.body].material.youngs_modulus for s in surfaces)   # one E: scene.py checks it
         dies.append({"index": i, "spec": die, "surface": whole, "nodes": whole.nodes, "area": whole.area, "h": h,
                      "eps_n": die.penalty * E / h, "radius": die.search_distance * h,
@@ -316,6 +378,13 @@ SLIP_WARNING = 0.5
 # of a pair's normal force (0.04-0.07 where large sliding settled on configs/sliding_cubes.toml: master nodes past
 # the slave's edge that its rows press; 0.61-1.0 where a 1.2 m slide in two steps had left the lower cube)
 UNFACED_WARNING = 0.5
+# a pair is said to let nodes through when a node that carries no contact force penetrates the other surface by
+# more than UNFORCED_WARNING x h_eff and UNFORCED_RATIO x the deepest pressed node (ContactModel.slip_warnings): a
+# chisel's 60-degree edge under segment or Gauss rows sank the whole stroke with no force (weighted gaps spread it
+# over the edge's faces, open beside it; hunt28_5 F4), while at a contact zone's rim, where rows open, a node is
+# shallower than the pressed ones
+UNFORCED_WARNING = 1e-3
+UNFORCED_RATIO = 10.0
 
 
 class ContactModel:
@@ -333,6 +402,7 @@ class ContactModel:
         self.slip_warned = set()
         self.met = set()           # the pairs whose surfaces a search has found within reach (_check_found)
         self.apart = set()         # the pairs last said to have no rows (slip_warnings)
+        self.unforced = {}         # per pair: whether its last report found nodes sunk in with no force
         # per pair (report): the load factor of the search that made its rows, whether the last search kept an
         # earlier search's, the last search's _gap_change, and the searches of the last increment
         self.searches = {f"contact[{pd['index']}]": {"load_factor": 0.0, "gap_change": None, "kept": False, "count": 0}
@@ -636,7 +706,7 @@ class ContactModel:
                      "rows_searched_for": self.searches[term.name]["load_factor"],
                      "rows_kept": self.searches[term.name]["kept"], "searches": self.searches[term.name]["count"],
                      "gap_change": _finite_or_none(self.searches[term.name]["gap_change"])}
-            mean_pen, pressed_unfaced, unfaced_force, step_slip = {}, 0, {}, 0.0
+            mean_pen, pressed_unfaced, unfaced_force, step_slip, depth = {}, 0, {}, 0.0, {True: 0.0, False: 0.0}
             for side, S, T in (("slave", pd["slave"], pd["master"]), ("master", pd["master"], pd["slave"])):
                 _, ok, found = project_pass(mesh, S, T, X, U, pd["radius"], weighted=False)
                 area, normal = self._pressed_areas(S, X, U, found, F[_owned_rows(mesh, S.nodes)])
@@ -661,6 +731,9 @@ class ContactModel:
                 unfaced = ~ok & presses
                 status[S.nodes[unfaced], 0] = 1.0
                 pressed_unfaced += self.comm.allreduce(int(unfaced.sum()), op=MPI.SUM)
+                for with_force in (True, False):     # the deepest nodes with and without contact force
+                    depth[with_force] = max(depth[with_force], self.comm.allreduce(
+                        float(h[presses[ok] == with_force].max(initial=0.0)), op=MPI.MAX))
                 unfaced_force[side] = self.comm.allreduce(float((p_own * area)[unfaced].sum()), op=MPI.SUM)
                 force = self.comm.allreduce(-F[_owned_rows(mesh, S.nodes)].sum(axis=0), op=MPI.SUM)
                 entry[f"max_penetration_{side}"] = _finite_or_none(
@@ -682,6 +755,8 @@ class ContactModel:
             entry["swap_indicator"] = abs(ms - mm) / max(abs(ms), abs(mm), 1e-300)
             entry["max_slip_step"] = step_slip
             entry["pressed_unfaced_nodes"] = pressed_unfaced
+            entry["max_penetration_unforced"] = depth[False]
+            self.unforced[pd["index"]] = depth[False] > max(UNFORCED_WARNING * pd["h_eff"], UNFORCED_RATIO * depth[True])
             # the share of the slave's normal force those nodes carry (on the side where it is larger)
             entry["pressed_unfaced_share"] = max(unfaced_force.values()) / max(entry["total_normal_force"], 1e-300)
             summaries[f"contact[{pd['index']}] {pd['spec'].slave} / {pd['spec'].master}"] = entry
@@ -755,6 +830,16 @@ class ContactModel:
                 lines.append(f"{name}: the contact {what}; finite sliding keeps the rows searched at the step's "
                              f"start, whose error grows with that: use more load steps or sliding = \"large\""
                              f"{shape}")
+            if self.unforced.get(pd["index"]) and (name, "unforced") not in self.slip_warned:
+                self.slip_warned.add((name, "unforced"))
+                depth = entry["max_penetration_unforced"]
+                lines.append(
+                    f"{name}: nodes with no contact force penetrate the other surface by up to {depth:.3g} m = "
+                    f"{depth / pd['h_eff']:.2g} h_eff: no row holds them. A sharp edge or corner passes through "
+                    f"segment and Gauss rows, whose weighted gaps spread its penetration over the faces beside it, "
+                    f"open there (and through quasi_symmetric's nodal rows): nodal rows with master_slave or two_pass "
+                    f"hold it. Or their rows were searched before they slid there: use more load steps or "
+                    f"sliding = \"large\"")
             slip = max(entry["max_slip_slave"], entry["max_slip_master"])
             if spec.sliding == "small" and slip > SLIP_WARNING * pd["h_eff"] and name not in self.slip_warned:
                 self.slip_warned.add(name)

@@ -5,7 +5,7 @@ ranks, and on 3 ranks some rank owns no contact surface); assertions use all-red
 
 import numpy as np
 import pytest
-from conftest import CONFIGS, all_close, run_scene, write_gmsh_box
+from conftest import CONFIGS, all_close, run_scene, write_gmsh, write_gmsh_box
 from mpi4py import MPI
 
 from qsc_petsc.errors import SceneError
@@ -84,7 +84,7 @@ surface = "punch.zmax"
 type = "displacement"
 ux = 0.0
 uy = 0.0
-uz = -0.002
+uz = {uz}
 [[contact]]
 slave = "{slave}"
 master = "{master}"
@@ -97,16 +97,17 @@ pc_factor_mat_solver_type = "mumps"
 """
 
 
-def skin_runs(comm, folder, punch_cells, formulation, integration):
-    """The punch on the plate (one element thick) named by the touching faces, then by both bodies' whole skins:
-    per description, this rank's owned displacements, the last step's summary and its pair's entry."""
+def skin_runs(comm, folder, punch_cells, formulation, integration, gap=0.0):
+    """The punch (`gap` above the plate, pressed 0.002 into it) on the plate (one element thick) named by the
+    touching faces, then by both bodies' whole skins: per description, this rank's owned displacements, the last
+    step's summary and its pair's entry."""
     if comm.rank == 0:
         write_gmsh_box(folder / "plate.msh", None, (5, 5, 1), "hex", (0.0, 0.0, 0.0), (1.0, 1.0, 0.2))
-        write_gmsh_box(folder / "punch.msh", None, punch_cells, "hex", (0.3, 0.3, 0.2), (0.4, 0.4, 0.4))
+        write_gmsh_box(folder / "punch.msh", None, punch_cells, "hex", (0.3, 0.3, 0.2 + gap), (0.4, 0.4, 0.4))
     out = []
     for k, (slave, master) in enumerate((("punch.zmin", "plate.zmax"), ("punch.boundary", "plate.boundary"))):
         if comm.rank == 0:
-            (folder / f"s{k}.toml").write_text(SKIN_SCENE.format(slave=slave, master=master,
+            (folder / f"s{k}.toml").write_text(SKIN_SCENE.format(slave=slave, master=master, uz=-0.002 - gap,
                                                                  formulation=formulation, integration=integration))
         comm.barrier()
         run, summary = run_scene(folder / f"s{k}.toml", folder / f"o{k}", (), comm)
@@ -137,19 +138,98 @@ def test_a_whole_skin_as_surface_gives_the_touching_faces_answer(comm, mpi_tmp, 
 
 @pytest.mark.parametrize("formulation", FORMULATIONS)
 @pytest.mark.parametrize("integration", ["segment", "nodal"])
-def test_a_whole_skin_of_tall_elements_gives_the_touching_faces_answer(comm, mpi_tmp, formulation, integration):
-    """A punch one element tall (cells 11x taller than wide) on the plate, named by the touching faces or by the
-    whole skins: the same rows, reported areas, force and reaction (to the penalty's h_eff, which the skins' side
-    faces change by 2e-6). The edge nodes' area-weighted normal leaned 84.8 degrees off, past the facing rule:
-    they lost their nodal rows and sank in (reaction 1.5 % low), and with segment rows the report gave them the
-    sides' areas (normal force 26 % low, contact area 3x; hunt28_4)."""
-    runs = skin_runs(comm, mpi_tmp, (11, 11, 1), formulation, integration)
+@pytest.mark.parametrize("punch_cells, gap", [((11, 11, 1), 0.0), ((4, 4, 20), 0.06)], ids=["tall", "thin"])
+def test_a_whole_skin_of_unequal_elements_gives_the_touching_faces_answer(comm, mpi_tmp, formulation, integration,
+                                                                          punch_cells, gap):
+    """A punch whose side faces are not the size of its touching face, named by the touching faces or by the
+    whole skins: the same h_eff and penalty, rows, reported areas, force and reaction.
+    * One element tall (cells 11x taller than wide): the edge nodes' area-weighted normal leaned 84.8 degrees
+      off, past the facing rule: they lost their nodal rows and sank in (reaction 1.5 % low), and with segment
+      rows the report gave them the sides' areas (normal force 26 % low, contact area 3x; hunt28_4).
+    * Twenty thin layers, 0.06 above the plate: the skins' mean face size (0.05, the sides' 320 faces) set
+      h_eff and the search's reach below the gap, and the run stopped with nothing within reach (exit 2;
+      hunt28_6 F2). h_eff now comes from the faces that can touch (the bottom's, 0.1)."""
+    runs = skin_runs(comm, mpi_tmp, punch_cells, formulation, integration, gap)
     (_, step0, pair0), (_, step1, pair1) = runs
     assert pair1["rows"] == pair0["rows"]
-    for names, rtol in ((("contact_area", "contact_area_master"), 1e-10), (("total_normal_force",), 1e-5)):
-        np.testing.assert_allclose([pair1[k] for k in names], [pair0[k] for k in names], rtol=rtol)
+    assert (pair1["h_eff"], pair1["eps_n"]) == (pair0["h_eff"], pair0["eps_n"])
+    names = ("contact_area", "contact_area_master", "total_normal_force")
+    np.testing.assert_allclose([pair1[k] for k in names], [pair0[k] for k in names], rtol=1e-9)   # round-off
     reaction = "boundary[0] plate.zmin"
-    assert step1["reactions"][reaction][2] == pytest.approx(step0["reactions"][reaction][2], rel=1e-5)
+    assert step1["reactions"][reaction][2] == pytest.approx(step0["reactions"][reaction][2], rel=1e-9)
+
+
+KNIFE_SCENE = """
+name = "knife"
+[[bodies]]
+name = "plate"
+mesh = {{ type = "file", path = "plate.msh" }}
+material = {{ youngs_modulus = 1000.0, poissons_ratio = 0.3 }}
+[[bodies]]
+name = "knife"
+mesh = {{ type = "file", path = "knife.msh" }}
+material = {{ youngs_modulus = 1000.0, poissons_ratio = 0.3 }}
+[[boundary]]
+surface = "plate.zmin"
+type = "displacement"
+ux = 0.0
+uy = 0.0
+uz = 0.0
+[[boundary]]
+surface = "knife.zmax"
+type = "displacement"
+ux = 0.0
+uy = 0.0
+uz = -0.002
+[[contact]]
+slave = "knife.zmin"
+master = "plate.zmax"
+formulation = "{formulation}"
+integration = "{integration}"
+[petsc]
+ksp_type = "preonly"
+pc_type = "lu"
+pc_factor_mat_solver_type = "mumps"
+"""
+
+
+@pytest.mark.parametrize("formulation, integration, held", [("master_slave", "segment", False),
+                                                            ("quasi_symmetric", "gauss", False),
+                                                            ("quasi_symmetric", "nodal", False),
+                                                            ("master_slave", "nodal", True),
+                                                            ("two_pass", "nodal", True)])
+def test_a_knife_that_passes_through_its_rows_is_said(comm, mpi_tmp, formulation, integration, held):
+    """A knife (hexes 0.25 wide folded into a V whose faces stand 45 degrees from the plate) pressed 0.002 into a
+    plate: nodal master_slave and two_pass rows hold its edge; segment and Gauss rows, whose weighted gaps average
+    the edge's penetration with the gap opening beside it, and quasi_symmetric's nodal rows let it through the
+    whole stroke with no force. That ended "ok" with no word (hunt28_5 F4); the summary now gives the deepest
+    penetration of a node without force and the log a warning."""
+    from qsc_petsc import fem
+    from qsc_petsc.meshgen import box_mesh
+    if comm.rank == 0:
+        write_gmsh_box(mpi_tmp / "plate.msh", None, (5, 5, 1), "hex", (0.0, 0.0, 0.0), (1.0, 1.0, 0.2))
+        box = box_mesh((0.0, 0.0, 0.0), (1.0, 1.0, 1.5), (4, 2, 6), "hex")
+        x = box.points.copy()
+        x[:, 2] += np.abs(x[:, 0] - 0.5) * (1.0 - x[:, 2] / 1.5) + 0.2     # the edge on the plate at x = 0.5
+        write_gmsh(mpi_tmp / "knife.msh", x, box.cells, "hex", {
+            side: fem.cell_faces("hex", box.cells[box.surfaces[side][:, 0]], box.surfaces[side][:, 1])
+            for side in box.surfaces})
+        (mpi_tmp / "knife.toml").write_text(KNIFE_SCENE.format(formulation=formulation, integration=integration))
+    comm.barrier()
+    lines = []
+    run, summary = run_scene(mpi_tmp / "knife.toml", mpi_tmp / "o", (), comm, log=lines.append)
+    run.destroy()
+    assert summary["status"] == "ok"
+    pair = next(iter(summary["steps"][-1]["contact"].values()))
+    warned = [line for line in lines if "no row holds them" in line]
+    if held:
+        assert pair["total_normal_force"] > 0.4 and pair["max_penetration_slave"] < 1e-6
+        assert pair["max_penetration_unforced"] == 0.0 and not warned
+    else:
+        assert pair["total_normal_force"] == 0.0
+        assert pair["max_penetration_unforced"] == pytest.approx(0.002, rel=1e-9)
+        assert len(warned) == (comm.rank == 0)
+        assert all("nodal rows with master_slave or two_pass" in line for line in warned)
 
 
 DIE_SKIN_SCENE = """
@@ -179,12 +259,14 @@ pc_factor_mat_solver_type = "mumps"
 
 
 @pytest.mark.parametrize("condition", ["frictionless", "sticking"])
-def test_a_die_on_a_whole_skin_presses_its_facing_face(comm, mpi_tmp, condition):
-    """A die on a plate's whole skin (one element thick, its far side within reach) shall give the answer of the
-    die on its top face, with the top's area: the sides' nodes took rows and the edge nodes the sides' areas
-    (contact area 1.5 for a 1 m2 face)."""
+@pytest.mark.parametrize("layers", [1, 5])
+def test_a_die_on_a_whole_skin_presses_its_facing_face(comm, mpi_tmp, condition, layers):
+    """A die on a plate's whole skin (its far side within reach with one layer) shall give the answer of the die
+    on its top face, with the top's area: the sides' nodes took rows and the edge nodes the sides' areas
+    (contact area 1.5 for a 1 m2 face). With five layers the sides' thin faces set the die's element size, and
+    with it the penalty, 1.65x the top's (hunt28_6 F2)."""
     if comm.rank == 0:
-        write_gmsh_box(mpi_tmp / "blk.msh", None, (4, 4, 1), "hex", (0.0, 0.0, 0.0), (1.0, 1.0, 0.25))
+        write_gmsh_box(mpi_tmp / "blk.msh", None, (4, 4, layers), "hex", (0.0, 0.0, 0.0), (1.0, 1.0, 0.25))
     out = []
     for k, surface in enumerate(("blk.zmax", "blk.boundary")):
         if comm.rank == 0:
@@ -194,7 +276,7 @@ def test_a_die_on_a_whole_skin_presses_its_facing_face(comm, mpi_tmp, condition)
         assert summary["status"] == "ok"
         die = summary["steps"][-1]["contact"]["die[0] top"]
         assert die["contact_area"] == pytest.approx(1.0, rel=1e-12)
-        out.append(die["force_on_bodies"] + [summary["steps"][-1]["max_abs_displacement"]])
+        out.append(die["force_on_bodies"] + [summary["steps"][-1]["max_abs_displacement"], die["eps_n"]])
         run.destroy()
     np.testing.assert_allclose(out[1], out[0], rtol=1e-10, atol=1e-12)
 
