@@ -8,7 +8,7 @@ import sys
 
 import numpy as np
 import pytest
-from conftest import ROOT, run_scene
+from conftest import CONFIGS, ROOT, run_scene
 
 sys.path.insert(0, str(ROOT / "scripts"))
 import stability as S
@@ -16,6 +16,7 @@ import stability as S
 from qsc_petsc import assembly, sparsity
 from qsc_petsc.contact.penalty import row_response
 from qsc_petsc.elasticity import RIGID_MODES as MODES
+from qsc_petsc.errors import ConvergenceError
 from qsc_petsc.restraint import free_motions
 
 FORMULATIONS = list(S.FORMULATIONS)
@@ -40,6 +41,24 @@ def test_penalty_from_1_to_1e10(alpha):
     assert abs(S.penetration_ratio(res) - 1.0) <= (1e-3 if extreme else 1e-6)
     assert S.force_error(res) <= (1e-6 if extreme else 1e-8)
     assert res["newton"] <= 3
+
+
+def test_a_solve_stalled_far_above_its_target_fails_and_says_why(tmp_path):
+    """two_pass with Gauss rows at alpha 1e10 on the patch test (4/7 cells): the Newton steps stop moving u
+    (below stol x |u|) while the residual stands ~4e9 x above its target, the rows' round-off. It ended
+    "converged" by that step test, with the contact force 1.8 % over the load (hunt29_1); now a failed solve
+    naming the stall and the stiffest rows. At alpha 1e8 the same steps stop at the round-off floor, and the
+    solve says where (round_off_floor)."""
+    sets = ["contact.0.formulation=two_pass", "contact.0.integration=gauss"]
+    with pytest.raises(ConvergenceError, match=r"STALLED_ABOVE_TARGET.*the residual \S+ x its target.*lower the "
+                                               r"penalty of the stiffest, contact\[0\] \(eps_n 7e\+13 Pa/m\)"):
+        run_scene(CONFIGS / "patch_test.toml", tmp_path / "1e10", sets + ["contact.0.penalty=1e10"])
+    _, summary = run_scene(CONFIGS / "patch_test.toml", tmp_path / "1e8", sets + ["contact.0.penalty=1e8"])
+    solve = summary["steps"][-1]["solves"][-1]
+    assert solve["snes_reason"] == "CONVERGED_SNORM_RELATIVE" and 0 < solve["round_off_floor"] < 1e-6
+    assert solve["stalled_above_target"] is None
+    pair = next(iter(summary["steps"][-1]["contact"].values()))
+    assert pair["total_normal_force"] == pytest.approx(1.0, rel=1e-6)
 
 
 def test_conditioning_grows_linearly_with_alpha():

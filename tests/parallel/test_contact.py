@@ -3,6 +3,8 @@
 Runs serially in the suite and under mpirun -n 2 and -n 3 (the interface is then split across
 ranks, and on 3 ranks some rank owns no contact surface); assertions use all-reduced values."""
 
+import json
+
 import numpy as np
 import pytest
 from conftest import CONFIGS, all_close, run_scene, write_gmsh, write_gmsh_box
@@ -159,17 +161,19 @@ def test_a_whole_skin_of_unequal_elements_gives_the_touching_faces_answer(comm, 
     assert step1["reactions"][reaction][2] == pytest.approx(step0["reactions"][reaction][2], rel=1e-9)
 
 
-@pytest.mark.parametrize("formulation, integration, held", [("master_slave", "segment", False),
-                                                            ("quasi_symmetric", "gauss", False),
-                                                            ("quasi_symmetric", "nodal", False),
-                                                            ("master_slave", "nodal", True),
-                                                            ("two_pass", "nodal", True)])
-def test_a_knife_that_passes_through_its_rows_is_said(comm, mpi_tmp, formulation, integration, held):
+@pytest.mark.parametrize("formulation, integration, knife, held", [
+    ("master_slave", "segment", "slave", False), ("quasi_symmetric", "gauss", "slave", False),
+    ("quasi_symmetric", "nodal", "slave", False), ("master_slave", "nodal", "slave", True),
+    ("two_pass", "nodal", "slave", True), ("master_slave", "nodal", "master", False),
+    ("two_pass", "nodal", "master", True)])
+def test_a_knife_that_passes_through_its_rows_is_said(comm, mpi_tmp, formulation, integration, knife, held):
     """A knife (body "punch" of SKIN_SCENE: hexes 0.25 wide folded into a V whose faces stand 45 degrees from the
-    plate) pressed 0.002 into the plate: nodal master_slave and two_pass rows hold its edge; segment and Gauss rows, whose weighted gaps average
-    the edge's penetration with the gap opening beside it, and quasi_symmetric's nodal rows let it through the
-    whole stroke with no force. That ended "ok" with no word (hunt28_5 F4); the summary now gives the deepest
-    penetration of a node without force and the log a warning."""
+    plate) pressed 0.002 into the plate. Nodal rows of master_slave with the knife as slave, and of two_pass,
+    hold its edge; segment and Gauss rows, whose weighted gaps average the edge's penetration with the gap
+    opening beside it, quasi_symmetric's nodal rows and master_slave's with the knife as master let it through
+    the whole stroke with no force. That ended "ok" with no word (hunt28_5 F4); the summary now gives the
+    deepest penetration of a node without force, per side, and the log a warning whose advice fits the side
+    (hunt29_2: master nodes were told nodal master_slave would hold them)."""
     from qsc_petsc import fem
     from qsc_petsc.meshgen import box_mesh
     if comm.rank == 0:
@@ -180,7 +184,8 @@ def test_a_knife_that_passes_through_its_rows_is_said(comm, mpi_tmp, formulation
         write_gmsh(mpi_tmp / "punch.msh", x, box.cells, "hex", {
             side: fem.cell_faces("hex", box.cells[box.surfaces[side][:, 0]], box.surfaces[side][:, 1])
             for side in box.surfaces})
-        (mpi_tmp / "knife.toml").write_text(SKIN_SCENE.format(slave="punch.zmin", master="plate.zmax", uz=-0.002,
+        roles = ("punch.zmin", "plate.zmax") if knife == "slave" else ("plate.zmax", "punch.zmin")
+        (mpi_tmp / "knife.toml").write_text(SKIN_SCENE.format(slave=roles[0], master=roles[1], uz=-0.002,
                                                               formulation=formulation, integration=integration))
     comm.barrier()
     lines = []
@@ -190,13 +195,16 @@ def test_a_knife_that_passes_through_its_rows_is_said(comm, mpi_tmp, formulation
     pair = next(iter(summary["steps"][-1]["contact"].values()))
     warned = [line for line in lines if "no row holds them" in line]
     if held:
-        assert pair["total_normal_force"] > 0.4 and pair["max_penetration_slave"] < 1e-6
-        assert pair["max_penetration_unforced"] == 0.0 and not warned
+        assert pair["total_normal_force"] > 0.4 and pair[f"max_penetration_{knife}"] < 1e-6
+        assert pair["max_penetration_unforced_slave"] == pair["max_penetration_unforced_master"] == 0.0
+        assert not warned
     else:
         assert pair["total_normal_force"] == 0.0
-        assert pair["max_penetration_unforced"] == pytest.approx(0.002, rel=1e-9)
+        assert pair[f"max_penetration_unforced_{knife}"] == pytest.approx(0.002, rel=1e-9)
         assert len(warned) == (comm.rank == 0)
-        assert all("nodal rows with master_slave or two_pass" in line for line in warned)
+        cure = ("nodal rows of master_slave or two_pass hold it" if knife == "slave" else
+                "master_slave never holds the master's nodes")
+        assert all(f": {knife} nodes with no contact force" in line and cure in line for line in warned)
 
 
 DIE_SKIN_SCENE = """
@@ -216,7 +224,7 @@ name = "top"
 point = [0.0, 0.0, 0.25]
 normal = [0.0, 0.0, -1.0]
 motion = [0.0, 0.0, -0.01]
-surfaces = ["{surface}"]
+surfaces = {surfaces}
 condition = "{condition}"
 [petsc]
 ksp_type = "preonly"
@@ -231,13 +239,15 @@ def test_a_die_on_a_whole_skin_presses_its_facing_face(comm, mpi_tmp, condition,
     """A die on a plate's whole skin (its far side within reach with one layer) shall give the answer of the die
     on its top face, with the top's area: the sides' nodes took rows and the edge nodes the sides' areas
     (contact area 1.5 for a 1 m2 face). With five layers the sides' thin faces set the die's element size, and
-    with it the penalty, 1.65x the top's (hunt28_6 F2)."""
+    with it the penalty, 1.65x the top's (hunt28_6 F2), and the same as a list of the top and two sides, taken
+    each on its own (2.24x; hunt29_2)."""
     if comm.rank == 0:
         write_gmsh_box(mpi_tmp / "blk.msh", None, (4, 4, layers), "hex", (0.0, 0.0, 0.0), (1.0, 1.0, 0.25))
     out = []
-    for k, surface in enumerate(("blk.zmax", "blk.boundary")):
+    for k, surfaces in enumerate((["blk.zmax"], ["blk.boundary"], ["blk.zmax", "blk.xmax", "blk.ymin"])):
         if comm.rank == 0:
-            (mpi_tmp / f"s{k}.toml").write_text(DIE_SKIN_SCENE.format(surface=surface, condition=condition))
+            text = DIE_SKIN_SCENE.format(surfaces=json.dumps(surfaces), condition=condition)
+            (mpi_tmp / f"s{k}.toml").write_text(text)
         comm.barrier()
         run, summary = run_scene(mpi_tmp / f"s{k}.toml", mpi_tmp / f"o{k}", (), comm)
         assert summary["status"] == "ok"
@@ -245,7 +255,8 @@ def test_a_die_on_a_whole_skin_presses_its_facing_face(comm, mpi_tmp, condition,
         assert die["contact_area"] == pytest.approx(1.0, rel=1e-12)
         out.append(die["force_on_bodies"] + [summary["steps"][-1]["max_abs_displacement"], die["eps_n"]])
         run.destroy()
-    np.testing.assert_allclose(out[1], out[0], rtol=1e-10, atol=1e-12)
+    for other in out[1:]:
+        np.testing.assert_allclose(other, out[0], rtol=1e-10, atol=1e-12)
 
 
 def test_two_pass_is_symmetric_in_the_roles(comm, mpi_tmp):
