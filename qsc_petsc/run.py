@@ -17,7 +17,7 @@ from .errors import OutputError, QscError, SceneError
 from .mesh import distribute_mesh, on_root
 from .output import ResultWriter, check_output_folder, clear_results, write_json, write_on_root
 from .restraint import Restraint, describe
-from .solver import System, solve_load_step
+from .solver import ROUND_OFF_WARNING, System, solve_load_step
 
 # Runs built and not yet destroyed, as weak references in creation order (the same order on every rank).
 _LIVE_RUNS = []
@@ -338,6 +338,14 @@ class Run:
                     self.summary["steps"].append(record)
                     self.write_summary()
                 last = stats["solves"][-1]
+                floor = last.get("round_off_floor")
+                if floor is not None and floor > ROUND_OFF_WARNING:
+                    eps, name = max(((term.eps_n, term.name) for term in system.terms), default=(0.0, ""))
+                    self.log(f"step {step}: warning: the solve stopped on its Newton steps (below stol x |u|) with "
+                             f"the residual at {floor:.2g} of its force scale: the round-off of the penalty rows (eps_n "
+                             f"times the coordinates' precision) lies there, and the contact forces and tractions may "
+                             f"be off by as much" + (f"; lower the penalty of the stiffest, {name} (eps_n {eps:.3g} "
+                                                     f"Pa/m)" if name else ""))
                 # both counts over every try of the step, cut back or not (the summary's snes/ksp_iterations)
                 self.log(f"step {step}/{n_steps}: load factor {t:.4g}, {record['snes_iterations']} Newton / "
                          f"{record['ksp_iterations']} Krylov iterations, "

@@ -62,11 +62,13 @@ KRYLOV_MARGIN = 0.1            # the Krylov residual's stop below the Newton tar
 # round-off floor (System._converged): a Newton step taken with the final active set that did not halve the
 # residual, which is within FLOOR_SPAN of the target, ends the solve (the linear solves cannot go lower)
 FLOOR_REDUCTION, FLOOR_SPAN = 0.5, 1e3
-# Newton steps below stol x |u| (the rows' round-off moves u no more) end a solve only with the residual within
-# this much of the target (relative 1e-4): flat_punch at alpha 1e8 / 1e9 / 1e10 with every formulation and rule
-# stopped there at 2-6e-8 / 2-5e-7 / 2-5e-6 of its force scale, but two_pass with Gauss or segment rows at 1e10
-# at 1-3e-2, its contact force 1 % off the dies' (exit 0, "converged"; hunt29_1): now a failed solve that says so
-STEP_FLOOR_SPAN = 1e6
+# a solve that stops on its Newton steps (below stol x |u|: the rows' round-off moves u no more) with the residual
+# above this share of its force scale is said (Run: a warning; round_off_floor in the summary). flat_punch at
+# alpha 1e8 / 1e9 / 1e10 stopped at 2-6e-8 / 2-5e-7 / 2-5e-6 with every formulation and rule, but two_pass with
+# Gauss or segment rows at 1e10 at 1-3e-2, its contact force 1-2 % off the dies' and its traction 5.6 %, with
+# no word (hunt29_1). Not a failure: large sliding's Gauss rows at 1e10 stopped at 3.5e-2 on some searches and
+# balanced the dies to 2e-6 (hunt29_3): the residual alone does not tell a wrong answer from round-off tractions
+ROUND_OFF_WARNING = 1e-4
 # a PETSc error inside the solve (System.solve_at): how long the failed rank waits for every other rank to fail
 # too before the error is treated as one rank's (re-raised: the CLI aborts the job rather than hang)
 AGREE_SECONDS = 20.0
@@ -337,7 +339,6 @@ class System:
         # round-off floor (None: it met the target)
         self.last_fnorm = None
         self.floor = None
-        self.stalled = None     # the residual / its target where the Newton steps stopped moving above it (_newton_test)
         self.own_options = set()       # options this system set (removed by destroy)
         # the rows' stiffnesses d the Jacobian holds: between two searches J = K + sum G^T diag(d) G depends
         # on u through d only, so an unchanged d keeps J, and the preconditioner built on it, as they are
@@ -658,7 +659,7 @@ class System:
             self._tie_gates()
         last_fnorm, self.last_fnorm = self.last_fnorm, fnorm
         if it == 0:
-            self.floor = self.stalled = None
+            self.floor = None
             return PETSc.SNES.ConvergedReason.CONVERGED_FNORM_ABS if fnorm <= atol else 0
         if not np.isfinite(fnorm):
             return PETSc.SNES.ConvergedReason.DIVERGED_FNORM_NAN
@@ -674,13 +675,8 @@ class System:
             if fnorm <= rtol * self.force_scale:
                 return PETSc.SNES.ConvergedReason.CONVERGED_FNORM_RELATIVE
             if ynorm <= stol * xnorm:
-                if fnorm <= STEP_FLOOR_SPAN * rtol * self.force_scale:
-                    self.floor = fnorm / self.force_scale
-                    return PETSc.SNES.ConvergedReason.CONVERGED_SNORM_RELATIVE
-                # the steps no longer move u, yet the residual stands far above the target: the rows' round-off
-                # (eps_n x the coordinates' precision) exceeds it (STEP_FLOOR_SPAN)
-                self.stalled = fnorm / (rtol * self.force_scale)
-                return PETSc.SNES.ConvergedReason.DIVERGED_LOCAL_MIN
+                self.floor = fnorm / self.force_scale
+                return PETSc.SNES.ConvergedReason.CONVERGED_SNORM_RELATIVE
             before = self.fnorms[-3] if len(self.fnorms) >= 3 else None
             if self._on_floor(it, fnorm, last_fnorm, rtol * self.force_scale, before):
                 self.floor = fnorm / self.force_scale
@@ -829,8 +825,6 @@ class System:
         if reason == 0 and ksp_reason < 0:      # stopped inside the linear solve, before SNES set its reason
             reason = PETSc.SNES.ConvergedReason.DIVERGED_LINEAR_SOLVE
         shown = SNES_REASONS.get(reason, str(reason))
-        if reason < 0 and self.stalled is not None:
-            shown = "STALLED_ABOVE_TARGET"
         if reason > 0 and reason != self.test_reason:
             shown += " (set by SNES itself; the Newton test had not passed)"
             reason = -reason
@@ -846,7 +840,6 @@ class System:
             "tied_rows": self.tied_rows,       # sticking die rows kept closed after cycling (_tie_gates)
             "tied_in_tension": self._tied_in_tension(),   # of those, the ones the answer pulls on
             "round_off_floor": self.floor,     # the relative residual it stopped at on the floor, or None
-            "stalled_above_target": self.stalled,   # residual / target where the steps stopped moving, or None
             "jacobian_assemblies": self.jacobian_rebuilds - rebuilds,   # with rows: one per new active set
         }
         if reason > 0:
@@ -1001,7 +994,8 @@ def _merge(stats, more):
     stats["tied_rows"] = max(stats["tied_rows"], more["tied_rows"])
     if stats["damped_from"] is None:        # the Newton iteration of the first solve that met cycling
         stats["damped_from"] = more["damped_from"]
-    stats.update({k: more[k] for k in ("snes_reason", "ksp_reason", "active_rows", "tied_in_tension")})
+    stats.update({k: more[k] for k in ("snes_reason", "ksp_reason", "active_rows", "tied_in_tension",
+                                       "round_off_floor")})
     if "multipliers_unsettled" in more:     # the outcome's: why a later solve of the try failed
         stats["multipliers_unsettled"] = more["multipliers_unsettled"]
 
@@ -1124,13 +1118,6 @@ def solve_load_step(system, step, t_prev, t_target, u, update_terms, max_cutback
                        f"from the other surface, or beside its edge) penetrate it: use more load steps or sliding = "
                        f"\"large\" (whose searches follow the nodes), or raise search_distance if they came from "
                        f"above the surface")
-            if stats["snes_reason"] == "STALLED_ABOVE_TARGET":
-                eps, name = max(((term.eps_n, term.name) for term in system.terms), default=(0.0, ""))
-                why = (f"; the Newton steps stopped moving u (below stol x |u|) with the residual "
-                       f"{stats['stalled_above_target']:.2g} x its target: the round-off of the penalty rows (eps_n "
-                       f"times the coordinates' precision) lies above it" + (
-                           f"; lower the penalty of the stiffest, {name} (eps_n {eps:.3g} Pa/m), or use "
-                           f"enforcement = \"augmented_lagrangian\" at a lower alpha" if name else ""))
             if stats["snes_reason"] == "SEARCH_NOT_SETTLED":
                 why = (f"; the rows of the large-sliding pairs had not settled after {max_searches} searches "
                        f"(contact[i].max_searches; more load steps slide less per increment)")

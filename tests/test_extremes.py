@@ -16,7 +16,6 @@ import stability as S
 from qsc_petsc import assembly, sparsity
 from qsc_petsc.contact.penalty import row_response
 from qsc_petsc.elasticity import RIGID_MODES as MODES
-from qsc_petsc.errors import ConvergenceError
 from qsc_petsc.restraint import free_motions
 
 FORMULATIONS = list(S.FORMULATIONS)
@@ -43,22 +42,24 @@ def test_penalty_from_1_to_1e10(alpha):
     assert res["newton"] <= 3
 
 
-def test_a_solve_stalled_far_above_its_target_fails_and_says_why(tmp_path):
+def test_a_solve_that_stops_on_its_round_off_says_how_far_off_it_stands(tmp_path):
     """two_pass with Gauss rows at alpha 1e10 on the patch test (4/7 cells): the Newton steps stop moving u
-    (below stol x |u|) while the residual stands ~4e9 x above its target, the rows' round-off. It ended
-    "converged" by that step test, with the contact force 1.8 % over the load (hunt29_1); now a failed solve
-    naming the stall and the stiffest rows. At alpha 1e8 the same steps stop at the round-off floor, and the
-    solve says where (round_off_floor)."""
+    (below stol x |u|) while the residual stands at 2e-2 of its force scale, the rows' round-off, and the contact
+    force is 1.8 % over the load. It ended "converged" by that step test with no word (hunt29_1); the summary
+    now gives where it stopped (round_off_floor) and the log a warning naming the stiffest rows. At alpha 1e8 the
+    same steps stop at 1e-7 of the scale, without a warning."""
     sets = ["contact.0.formulation=two_pass", "contact.0.integration=gauss"]
-    with pytest.raises(ConvergenceError, match=r"STALLED_ABOVE_TARGET.*the residual \S+ x its target.*lower the "
-                                               r"penalty of the stiffest, contact\[0\] \(eps_n 7e\+13 Pa/m\)"):
-        run_scene(CONFIGS / "patch_test.toml", tmp_path / "1e10", sets + ["contact.0.penalty=1e10"])
-    _, summary = run_scene(CONFIGS / "patch_test.toml", tmp_path / "1e8", sets + ["contact.0.penalty=1e8"])
-    solve = summary["steps"][-1]["solves"][-1]
-    assert solve["snes_reason"] == "CONVERGED_SNORM_RELATIVE" and 0 < solve["round_off_floor"] < 1e-6
-    assert solve["stalled_above_target"] is None
-    pair = next(iter(summary["steps"][-1]["contact"].values()))
-    assert pair["total_normal_force"] == pytest.approx(1.0, rel=1e-6)
+    for alpha, warned in (("1e10", True), ("1e8", False)):
+        lines = []
+        _, summary = run_scene(CONFIGS / "patch_test.toml", tmp_path / alpha, sets + [f"contact.0.penalty={alpha}"],
+                               log=lines.append)
+        solve = summary["steps"][-1]["solves"][-1]
+        assert summary["status"] == "ok" and solve["snes_reason"] == "CONVERGED_SNORM_RELATIVE"
+        said = [line for line in lines if "the solve stopped on its Newton steps" in line]
+        assert (solve["round_off_floor"] > 1e-4) == warned and len(said) == warned
+        assert all("lower the penalty of the stiffest, contact[0] (eps_n 7e+13 Pa/m)" in line for line in said)
+        force = next(iter(summary["steps"][-1]["contact"].values()))["total_normal_force"]
+        assert abs(force - 1.0) > 1e-2 if warned else force == pytest.approx(1.0, rel=1e-6)
 
 
 def test_conditioning_grows_linearly_with_alpha():
