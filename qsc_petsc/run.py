@@ -341,11 +341,12 @@ class Run:
                 floor = last.get("round_off_floor")
                 if floor is not None and floor > ROUND_OFF_WARNING:
                     eps, name = max(((term.eps_n, term.name) for term in system.terms), default=(0.0, ""))
+                    why = (f"the round-off of the penalty rows (eps_n times the coordinates' precision) lies there, "
+                           f"and the contact forces and tractions may be off by as much; lower the penalty of the "
+                           f"stiffest, {name} (eps_n {eps:.3g} Pa/m)" if name else
+                           "the linear solves' round-off lies there, and the reactions may be off by as much")
                     self.log(f"step {step}: warning: the solve stopped on its Newton steps (below stol x |u|) with "
-                             f"the residual at {floor:.2g} of its force scale: the round-off of the penalty rows (eps_n "
-                             f"times the coordinates' precision) lies there, and the contact forces and tractions may "
-                             f"be off by as much" + (f"; lower the penalty of the stiffest, {name} (eps_n {eps:.3g} "
-                                                     f"Pa/m)" if name else ""))
+                             f"the residual at {floor:.2g} of its force scale: {why}")
                 # both counts over every try of the step, cut back or not (the summary's snes/ksp_iterations)
                 self.log(f"step {step}/{n_steps}: load factor {t:.4g}, {record['snes_iterations']} Newton / "
                          f"{record['ksp_iterations']} Krylov iterations, "
