@@ -695,8 +695,8 @@ def symmetry_axis(mesh, index, surface):
     """The axis normal to an axis-aligned symmetry surface (collective: all ranks agree)."""
     c, lf = mesh.surface_faces(surface)
     xf = mesh.coords[mesh.face_nodes(c, lf)]
-    n, _ = fem.face_normals(mesh.face_type, xf, fem.CENTROID[mesh.face_type][None, :])
-    total = mesh.comm.allreduce(np.abs(n[:, 0, :]).sum(axis=0) if len(n) else np.zeros(3), op=MPI.SUM)
+    n = fem.centroid_normals(mesh.face_type, xf)
+    total = mesh.comm.allreduce(np.abs(n).sum(axis=0) if len(n) else np.zeros(3), op=MPI.SUM)
     count = mesh.comm.allreduce(len(n), op=MPI.SUM)
     axis = int(np.argmax(total))
     if count == 0 or total[axis] < count * (1.0 - 1e-9):

@@ -232,6 +232,11 @@ def face_normals(face_type, xf, xi):
     return n / jac[..., None], jac
 
 
+def centroid_normals(face_type, xf):
+    """Outward unit normals (m, 3) of faces with node coordinates xf (m, nv, 3) at their reference centroids."""
+    return face_normals(face_type, xf, CENTROID[face_type][None, :])[0][:, 0]
+
+
 def face_nodal_areas(face_type, xf, n_gauss=2):
     """Tributary areas int_f N_i ds (m, nv) of each node of faces with coordinates xf (m, nv, 3)."""
     xi, w = GAUSS[face_type](n_gauss)

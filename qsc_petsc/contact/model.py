@@ -89,9 +89,7 @@ def surface_data(mesh, name, template):
     area = a[:, 0]
     keep = area > 0                       # a labelled vertex that touches the surface only elsewhere
     nodes, area, a = nodes[keep], area[keep], a[keep]
-    total_size = comm.allreduce(float(size.sum()), op=MPI.SUM)
-    count = comm.allreduce(len(size), op=MPI.SUM)
-    S = Surface(name, body, faces, nodes, area, a[:, 1] / area, None, total_size / max(count, 1),
+    S = Surface(name, body, faces, nodes, area, a[:, 1] / area, None, _mean_over(comm, size, 0.0),
                 comm.allreduce(float(nodal.sum()), op=MPI.SUM), template)
     S.normal = nodal_normals(mesh, S, mesh.coords)
     return S
@@ -120,7 +118,7 @@ def nodal_normals(mesh, S, x, by="area"):
     the angles put it at 45 degrees on any box edge, 55 at a corner."""
     xf = x[S.faces]
     if len(S.faces):
-        normal, _ = fem.face_normals(mesh.face_type, xf, fem.CENTROID[mesh.face_type][None, :])
+        normal = fem.centroid_normals(mesh.face_type, xf)
         if by == "area":
             weight = fem.face_nodal_areas(mesh.face_type, xf)
         else:
@@ -129,8 +127,8 @@ def nodal_normals(mesh, S, x, by="area"):
                                                              np.linalg.norm(after, axis=2))
             weight = np.arccos(np.clip(cos, -1.0, 1.0))
     else:
-        weight, normal = np.zeros((0, S.faces.shape[1])), np.zeros((0, 1, 3))
-    nvec = _nodal_sums(mesh, S.faces, weight[:, :, None] * normal[:, 0, None, :], S.nodes, S.template)
+        weight, normal = np.zeros((0, S.faces.shape[1])), np.zeros((0, 3))
+    nvec = _nodal_sums(mesh, S.faces, weight[:, :, None] * normal[:, None, :], S.nodes, S.template)
     nrm = np.linalg.norm(nvec, axis=1)
     return nvec / np.where(nrm > 0, nrm, 1.0)[:, None]
 
@@ -228,18 +226,17 @@ def facing_areas(mesh, S, X, U, which, found):
     target.destroy()
     nv = S.faces.shape[1]
     if len(S.faces):
-        centroid = fem.CENTROID[mesh.face_type][None, :]
-        now, _ = fem.face_normals(mesh.face_type, (X + U)[S.faces], centroid)
-        ref, _ = fem.face_normals(mesh.face_type, X[S.faces], centroid)
+        now = fem.centroid_normals(mesh.face_type, (X + U)[S.faces])
+        ref = fem.centroid_normals(mesh.face_type, X[S.faces])
         nodal = fem.face_nodal_areas(mesh.face_type, X[S.faces])
     else:
-        now = ref = np.zeros((0, 1, 3))
+        now = ref = np.zeros((0, 3))
         nodal = np.zeros((0, nv))
-    away = (np.abs(faced).sum(axis=2) > 0) & ~facing_pairs(faced, np.broadcast_to(now, faced.shape))
+    away = (np.abs(faced).sum(axis=2) > 0) & ~facing_pairs(faced, np.broadcast_to(now[:, None, :], faced.shape))
     values = np.zeros(nodal.shape + (3,))
     values[..., 0] = nodal * away
     away_area = _nodal_sums(mesh, S.faces, values, S.nodes[which], S.template)[:, 0]
-    turned = _nodal_sums(mesh, S.faces, (nodal * ~away)[:, :, None] * ref, S.nodes[which], S.template)
+    turned = _nodal_sums(mesh, S.faces, (nodal * ~away)[:, :, None] * ref[:, None, :], S.nodes[which], S.template)
     area, normal = S.area[which].copy(), S.normal[which].copy()
     part = (away_area > 0) & (away_area < (1.0 - 1e-9) * area)     # a node with no face turned keeps its own
     area[part] -= away_area[part]
@@ -281,8 +278,8 @@ def _face_geometry(mesh, S):
     xf = mesh.coords[S.faces]
     if not len(xf):
         return np.zeros((0, 13))
-    normal, _ = fem.face_normals(mesh.face_type, xf, fem.CENTROID[mesh.face_type][None, :])
-    return np.hstack([xf.mean(axis=1), normal[:, 0], fem.face_size(xf)[:, None], xf.min(axis=1), xf.max(axis=1)])
+    return np.hstack([xf.mean(axis=1), fem.centroid_normals(mesh.face_type, xf), fem.face_size(xf)[:, None],
+                      xf.min(axis=1), xf.max(axis=1)])
 
 
 def _mean_over(comm, sizes, fallback):
