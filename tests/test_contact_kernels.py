@@ -151,6 +151,25 @@ def test_projection_recovers_xi_on_warped_quads():
     assert pr.inside.all()
 
 
+@pytest.mark.parametrize("offset", [1e3, 1e6])
+def test_projection_on_quads_far_from_the_origin(offset):
+    """The same warped quads and points moved offset away (the faces 1 m wide): the same xi, inside, to the
+    coordinates' own round-off (eps x offset). The Newton residual read x(xi) - p from the coordinates, whose
+    round-off (eps |x| / h in xi) kept its steps above NEWTON_TOL at |x| / h ~ 500 and more: the points went to the
+    edges, and their rows away (a body 1000 m off lost 16 % of its rows; hunt30_1)."""
+    rng = np.random.default_rng(3)
+    faces = np.array([random_warped_quad(rng) for _ in range(200)])
+    xi = rng.uniform(-0.95, 0.95, (200, 2))
+    N, _ = fem.shape_quad(xi)
+    on = np.einsum("pv,pvi->pi", N, faces)
+    n = np.array([fem.face_normals("quad", f[None], x[None])[0][0, 0] for f, x in zip(faces, xi)])
+    shift = offset * np.array([1.0, -0.6, 0.3])
+    pr = project_on_faces(on + 0.03 * n + shift, faces + shift, "quad")
+    assert pr.inside.all()
+    np.testing.assert_allclose(pr.xi, xi, atol=50 * np.finfo(float).eps * offset)
+    np.testing.assert_allclose(pr.distance, 0.03, atol=50 * np.finfo(float).eps * offset)
+
+
 def brute_force_distance(point, face, face_type, k=601):
     s = np.linspace(-1, 1, k) if face_type == "quad" else np.linspace(0, 1, k)
     X, Y = np.meshgrid(s, s, indexing="ij")

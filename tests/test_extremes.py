@@ -168,6 +168,34 @@ def test_length_units(case):
         assert np.abs(res["stress"] - ref["stress"]).max() <= 1e-8 * np.abs(ref["stress"]).max()
 
 
+@pytest.mark.parametrize("integration", ["nodal", "gauss", "segment"])
+def test_a_scene_far_from_the_origin(tmp_path, integration):
+    """The two cubes between dies (hexes: quad faces) moved 1e3 and 1e6 m along x, y, z (the cubes 1 m): the
+    origin's rows, force and area, and its penetrations to the coordinates' own round-off. At 1e3 nodal rows lost 16 % of theirs and Gauss rows sank a node 2.7 mm,
+    exit 0 (the quad projection's Newton residual took the coordinates' round-off; hunt30_1)."""
+    sets = ["bodies.0.mesh.cells=[3,3,3]", "bodies.1.mesh.cells=[4,4,4]", f"contact.0.integration={integration}"]
+    out = []
+    for k, d in enumerate((0.0, 1e3, 1e6)):
+        shift = np.array([1.0, -2.0, 3.0]) * d
+        moved = [f"bodies.0.mesh.origin=[{shift[0]},{shift[1]},{shift[2]}]",
+                 f"bodies.1.mesh.origin=[{shift[0]},{shift[1]},{shift[2] + 1.0}]",
+                 f"die.0.point=[{shift[0]},{shift[1]},{shift[2]}]",
+                 f"die.1.point=[{shift[0]},{shift[1]},{shift[2] + 2.0}]"]
+        run, summary = run_scene(CONFIGS / "two_cubes_dies.toml", tmp_path / str(k), sets + moved)
+        run.destroy()
+        assert summary["status"] == "ok"
+        out.append(next(v for key, v in summary["steps"][-1]["contact"].items() if key.startswith("contact[")))
+    for d, pair in zip((1e3, 1e6), out[1:]):
+        assert (pair["rows"], pair["active_rows"], pair["pressed_unfaced_nodes"]) == (
+            out[0]["rows"], out[0]["active_rows"], 0)
+        for key in ("total_normal_force", "contact_area"):
+            assert pair[key] == pytest.approx(out[0][key], rel=1e-6), key
+        # a coordinate 3.7e6 m from the origin is known to eps |x| = 8e-10 m: the penetrations to that
+        rounding = 10 * np.finfo(float).eps * np.linalg.norm([1.0, 2.0, 3.0]) * d
+        for key in ("max_penetration_slave", "mean_penetration_slave"):
+            assert pair[key] == pytest.approx(out[0][key], rel=1e-9, abs=rounding), key
+
+
 # ---------------------------------------------------------------- gaps, penetration, holding
 
 def special(name):

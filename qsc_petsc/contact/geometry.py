@@ -150,8 +150,10 @@ def _project_quad(points, face_xyz):
         q = xi[todo]
         t1 = a1[todo] + q[:, 1, None] * a12[todo]
         t2 = a2[todo] + q[:, 0, None] * a12[todo]
-        r = x_c[todo] + q[:, 0, None] * a1[todo] + q[:, 1, None] * a2[todo] \
-            + (q[:, 0] * q[:, 1])[:, None] * a12[todo] - points[todo]
+        # x(xi) - p from the centre's offset r0, not from the coordinates: far from the origin (|x| / h above ~500)
+        # their difference's round-off, eps |x| / h in xi, kept every step above NEWTON_TOL and the point went to
+        # an edge, with no row (a body 1000 m off: 16 % of the rows lost, exit 0; hunt30_1)
+        r = q[:, 0, None] * a1[todo] + q[:, 1, None] * a2[todo] + (q[:, 0] * q[:, 1])[:, None] * a12[todo] - r0[todo]
         f1, f2 = _dot(r, t1), _dot(r, t2)
         j11, j22 = _dot(t1, t1), _dot(t2, t2)
         j12 = _dot(t1, t2) + _dot(r, a12[todo])
