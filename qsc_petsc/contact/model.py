@@ -119,18 +119,42 @@ def nodal_normals(mesh, S, x, by="area"):
     xf = x[S.faces]
     if len(S.faces):
         normal = fem.centroid_normals(mesh.face_type, xf)
-        if by == "area":
-            weight = fem.face_nodal_areas(mesh.face_type, xf)
-        else:
-            before, after = np.roll(xf, 1, axis=1) - xf, np.roll(xf, -1, axis=1) - xf
-            cos = np.einsum("kvi,kvi->kv", before, after) / (np.linalg.norm(before, axis=2) *
-                                                             np.linalg.norm(after, axis=2))
-            weight = np.arccos(np.clip(cos, -1.0, 1.0))
+        weight = fem.face_nodal_areas(mesh.face_type, xf) if by == "area" else _corner_angles(xf)
     else:
         weight, normal = np.zeros((0, S.faces.shape[1])), np.zeros((0, 3))
     nvec = _nodal_sums(mesh, S.faces, weight[:, :, None] * normal[:, None, :], S.nodes, S.template)
     nrm = np.linalg.norm(nvec, axis=1)
     return nvec / np.where(nrm > 0, nrm, 1.0)[:, None]
+
+
+def _corner_angles(xf):
+    """The angles (k, nv) of faces with node coordinates xf (k, nv, 3) at their nodes."""
+    before, after = np.roll(xf, 1, axis=1) - xf, np.roll(xf, -1, axis=1) - xf
+    cos = np.einsum("kvi,kvi->kv", before, after) / (np.linalg.norm(before, axis=2) * np.linalg.norm(after, axis=2))
+    return np.arccos(np.clip(cos, -1.0, 1.0))
+
+
+def feature_nodes(mesh, S, angle):
+    """A mask over S's owned nodes: those where S folds convexly by more than `angle` (radians) in the reference
+    configuration, the sharp edges and corners that weighted gaps let through (contact[].feature_angle). A node's
+    faces tilt from its angle-weighted normal m by arccos(|sum w n_f| / sum w) on average (w: the faces' angles at
+    the node, n_f their centroid normals): 45 degrees on a box's edge, 54.7 at its corner, a knife's faces' tilt
+    from its edge's normal; the fold is convex when the faces' centroids lie behind the node along m, as on a
+    ridge, not in a valley. Sums over ranks, so the same nodes on any number of them. Collective."""
+    xf = mesh.coords[S.faces]
+    nv = S.faces.shape[1]
+    values = np.zeros((len(S.faces), nv, 3, 3))      # per face node: w n_f, w (c_f - x_k), (w, 0, 0)
+    if len(S.faces):
+        w = _corner_angles(xf)
+        values[..., 0, :] = w[:, :, None] * fem.centroid_normals(mesh.face_type, xf)[:, None, :]
+        values[..., 1, :] = w[:, :, None] * (xf.mean(axis=1)[:, None, :] - xf)
+        values[..., 2, 0] = w
+    m, behind, total = (_nodal_sums(mesh, S.faces, values[..., j, :], S.nodes, S.template) for j in range(3))
+    total = total[:, 0]
+    size = np.linalg.norm(m, axis=1)
+    tilt = np.arccos(np.clip(size / np.where(total > 0, total, 1.0), -1.0, 1.0))
+    ridge = np.einsum("ki,ki->k", behind, m) < 0.0
+    return (tilt > angle) & ridge & (total > 0)
 
 
 def exchange_faces(mesh, faces, X, U, sizes, need_lo, need_hi):
@@ -218,21 +242,8 @@ def facing_areas(mesh, S, X, U, which, found):
     numbers). A surface that holds faces beside the contact (a punch's whole skin: its sides) gave its edge nodes
     the sides' areas too: their nodal rows, tractions and the contact area counted them (a punch's contact area
     0.54 against 0.36 m2; hunt28_3). Collective."""
-    ok = found["face"] >= 0
-    target = S.template.duplicate()
-    target.set(0.0)
-    target.getArray().reshape(-1, 3)[_owned_rows(mesh, S.nodes[which])[ok]] = found["normal"][ok]
-    faced = mesh.local_vectors(target)[S.faces]                  # (k, nv, 3): the T normal each face node found
-    target.destroy()
-    nv = S.faces.shape[1]
-    if len(S.faces):
-        now = fem.centroid_normals(mesh.face_type, (X + U)[S.faces])
-        ref = fem.centroid_normals(mesh.face_type, X[S.faces])
-        nodal = fem.face_nodal_areas(mesh.face_type, X[S.faces])
-    else:
-        now = ref = np.zeros((0, 3))
-        nodal = np.zeros((0, nv))
-    away = (np.abs(faced).sum(axis=2) > 0) & ~facing_pairs(faced, np.broadcast_to(now[:, None, :], faced.shape))
+    _, _, nodal, away = _turned_faces(mesh, S, X, U, which, found)
+    ref = fem.centroid_normals(mesh.face_type, X[S.faces]) if len(S.faces) else np.zeros((0, 3))
     values = np.zeros(nodal.shape + (3,))
     values[..., 0] = nodal * away
     away_area = _nodal_sums(mesh, S.faces, values, S.nodes[which], S.template)[:, 0]
@@ -243,6 +254,39 @@ def facing_areas(mesh, S, X, U, which, found):
     size = np.linalg.norm(turned[part], axis=1)
     normal[part] = turned[part] / np.where(size > 0, size, 1.0)[:, None]
     return area, normal
+
+
+def _turned_faces(mesh, S, X, U, which, found):
+    """Per face node of S's local faces (k, nv): the outward normal of the T face that node found (zero: none or
+    not among `which`), the faces' centroid normals now (k, 3), their reference nodal areas, and whether the face
+    is turned away from the T face its node found (search.FACING). Collective."""
+    ok = found["face"] >= 0
+    target = S.template.duplicate()
+    target.set(0.0)
+    target.getArray().reshape(-1, 3)[_owned_rows(mesh, S.nodes[which])[ok]] = found["normal"][ok]
+    faced = mesh.local_vectors(target)[S.faces]                  # (k, nv, 3): the T normal each face node found
+    target.destroy()
+    if len(S.faces):
+        now = fem.centroid_normals(mesh.face_type, (X + U)[S.faces])
+        nodal = fem.face_nodal_areas(mesh.face_type, X[S.faces])
+    else:
+        now, nodal = np.zeros((0, 3)), np.zeros((0, S.faces.shape[1]))
+    away = (np.abs(faced).sum(axis=2) > 0) & ~facing_pairs(faced, np.broadcast_to(now[:, None, :], faced.shape))
+    return faced, now, nodal, away
+
+
+def facing_lean(mesh, S, X, U, which, found):
+    """For S's owned nodes `which`: the mean, over the node's faces turned towards the T face it found (weighted
+    by the node's reference areas on them), of the cosine between a face's normal and that T face's inward
+    normal -n_T: 1 where a face around the node lies parallel to the other surface, cos(theta) on a knife's edge
+    whose faces stand theta from it (1: a node that found no face). Collective."""
+    faced, now, nodal, away = _turned_faces(mesh, S, X, U, which, found)
+    turned = nodal * ((np.abs(faced).sum(axis=2) > 0) & ~away)
+    values = np.zeros(nodal.shape + (3,))
+    values[..., 0] = turned
+    values[..., 1] = turned * -np.einsum("ki,kvi->kv", now, faced)
+    sums = _nodal_sums(mesh, S.faces, values, S.nodes[which], S.template)
+    return np.where(sums[:, 0] > 0, sums[:, 1] / np.where(sums[:, 0] > 0, sums[:, 0], 1.0), 1.0)
 
 
 def gauss_pass(mesh, S, T, X, U, radius, n, memo=None):
@@ -354,9 +398,15 @@ def contact_pairs_data(mesh, scene, template):
         M = surface_data(mesh, pair.master, template)
         E = min(scene.bodies[S.body].material.youngs_modulus, scene.bodies[M.body].material.youngs_modulus)
         h_eff = min(touching_sizes(mesh, S, M))
+        features = None
+        if pair.feature_angle is not None:
+            angle = np.radians(pair.feature_angle)
+            features = {"slave": feature_nodes(mesh, S, angle), "master": feature_nodes(mesh, M, angle)}
         pairs.append({"index": i, "spec": pair, "slave": S, "master": M, "h_eff": h_eff,
                       "eps_n": pair.penalty * E / h_eff, "radius": pair.search_distance * h_eff,
-                      "memo": {"slave": {}, "master": {}, "master_nodes": {}}})     # faces kept (_search_pass)
+                      "features": features,
+                      "memo": {"slave": {}, "master": {}, "master_nodes": {}, "features_slave": {},
+                               "features_master": {}}})     # faces kept (_search_pass)
     return pairs
 
 
@@ -605,8 +655,14 @@ class ContactModel:
                                                                      move=self._to_row_owners)
                 else:
                     rows = row_builders.quasi_symmetric(sp, mp, weight)
+            feature_ids = ()
+            if pd["features"] is not None:
+                with self._phase("search"):
+                    passes, feature_ids = self._feature_passes(pd, X, U)
+                rows = row_builders.with_nodal_rows(rows, passes, feature_ids)
             term = self._term(name, rows, pd["eps_n"], pd["h_eff"], spec.enforcement == "augmented_lagrangian",
                               alpha=spec.penalty)
+            term.feature_rows = len(feature_ids)
             term.points = points
             term.augmented_tolerance = spec.augmented_tolerance
             # the pressure of a strain of FLOOR_STRAIN: E_eff FLOOR_STRAIN, E_eff = eps_n h_eff / alpha
@@ -623,6 +679,25 @@ class ContactModel:
             searched_for = self.searches[name]["load_factor"] if reused else t
             self.searches[name] = dict(self.searches[name], load_factor=searched_for, gap_change=change, kept=reused)
         return term
+
+    def _feature_passes(self, pd, X, U):
+        """The feature nodes' (feature_nodes) nodal passes against the other surface, and the global row ids of
+        those that found a face (every rank's): their rows are to be these (rows.with_nodal_rows). Collective."""
+        passes, ids = [], []
+        lean = np.cos(np.radians(pd["spec"].feature_angle))
+        for side, S, T in (("slave", pd["slave"], pd["master"]), ("master", pd["master"], pd["slave"])):
+            which = pd["features"][side]
+            if not self.comm.allreduce(bool(which.any()), op=MPI.LOR):
+                continue
+            fp, ok, found = project_pass(self.mesh, S, T, X, U, pd["radius"], pd["memo"][f"features_{side}"],
+                                         which)
+            # the ridge's faces that can meet the other surface lean away from it: a box's edge whose face lies
+            # on the other surface is held by that face's rows
+            sharp = S.nodes[which][ok & (facing_lean(self.mesh, S, X, U, which, found) < lean)]
+            passes.append(fp.subset(np.isin(fp.node, self.mesh.gvert[sharp])))
+            ids.append(3 * self.mesh.gvert[sharp])
+        ids = np.concatenate(ids) if ids else np.zeros(0, dtype=np.int64)
+        return passes, np.concatenate(self.comm.allgather(ids)).astype(np.int64)
 
     def settle(self, u):
         """Large sliding, after a converged solve at the current load factor: each large-sliding pair searched
@@ -716,7 +791,8 @@ class ContactModel:
             entry = {"rows": self.comm.allreduce(len(term.rows), op=MPI.SUM),
                      "active_rows": self.comm.allreduce(int(term.active.sum()), op=MPI.SUM),
                      "eps_n": pd["eps_n"], "h_eff": pd["h_eff"], "integration": pd["spec"].integration,
-                     "quadrature_points": term.points, "G_nonzeros": _nonzeros(term.G, self.comm),
+                     "quadrature_points": term.points, "feature_rows": term.feature_rows,
+                     "G_nonzeros": _nonzeros(term.G, self.comm),
                      "rows_searched_for": self.searches[term.name]["load_factor"],
                      "rows_kept": self.searches[term.name]["kept"], "searches": self.searches[term.name]["count"],
                      "gap_change": _finite_or_none(self.searches[term.name]["gap_change"])}
@@ -853,6 +929,12 @@ class ContactModel:
                 cure = ("nodal rows of master_slave or two_pass hold it" if sunk == ["slave"] else
                         "master_slave never holds the master's nodes: make the sharp (or finer) surface the slave with "
                         "nodal rows of master_slave, or use two_pass with nodal rows")
+                angle = spec.feature_angle
+                cure += (f"; or set contact[{pd['index']}].feature_angle (degrees) below the tilt of the edge's "
+                         f"faces, which gives such nodes nodal rows of their own with any formulation and rule"
+                         if angle is None else
+                         f"; feature_angle = {angle:g} gave nodal rows to the ridges whose faces tilt more than "
+                         f"that from the other surface: lower it to take in these")
                 lines.append(
                     f"{name}: {' and '.join(sunk)} nodes with no contact force penetrate the other surface by up to "
                     f"{depth:.3g} m = {depth / pd['h_eff']:.2g} h_eff: no row holds them. A sharp edge or corner (or a "

@@ -114,6 +114,12 @@ class Pass:
                 raise ValueError(f"Pass.{name} must have shape {shp}, got {a.shape}")
             setattr(self, name, a)
 
+    def subset(self, keep):
+        """The pass of the points of the mask keep."""
+        return Pass(**{name: getattr(self, name)[keep] for name in (
+            "node", "area", "size", "target_nodes", "shape", "normal", "delta0", "target_size", "source_nodes",
+            "source_shape")})
+
     @staticmethod
     def empty(ns, nv):
         """A pass without points, for S faces with ns nodes and T faces with nv nodes."""
@@ -211,6 +217,23 @@ def master_slave(slave_pass):
 def two_pass(slave_pass, master_pass):
     """One row per slave node (A_k h_k) and one per master node (B_l h_l), phi = 1/2."""
     return _rows([pass_rows(slave_pass, 1.0), pass_rows(master_pass, 1.0)], 0.5)
+
+
+def with_nodal_rows(rows, passes, ids):
+    """rows with the rows of global ids `ids` (every rank's) taken out and the nodal rows of the passes (nodal
+    projections of those nodes, pass_rows) put in their place, at rows' phi: a feature node's own row against
+    the other surface instead of its weighted one (contact[].feature_angle)."""
+    if not len(ids):
+        return rows
+    out = Rows(*(x[~np.isin(rows_of, ids)] for x, rows_of in (
+        (rows.G_rows, rows.G_rows), (rows.G_cols, rows.G_rows), (rows.G_vals, rows.G_rows),
+        (rows.g_rows, rows.g_rows), (rows.g_vals, rows.g_rows), (rows.W_rows, rows.W_rows),
+        (rows.W_vals, rows.W_rows))), rows.phi)
+    keep = ~np.isin(rows.gate_rows, ids) & ~np.isin(rows.gate_of, ids)
+    out.gate_rows, out.gate_of = rows.gate_rows[keep], rows.gate_of[keep]
+    for pss in passes:
+        out = Rows.concat(out, _rows([pass_rows(pss, 1.0)], rows.phi))
+    return out
 
 
 FINER_POWER = 4.0    # the "finer" rule: w_a = h_b^4 / (h_a^4 + h_b^4) (formulation.md section 8)

@@ -99,10 +99,10 @@ pc_factor_mat_solver_type = "mumps"
 """
 
 
-def skin_runs(comm, folder, punch_cells, formulation, integration, gap=0.0):
+def skin_runs(comm, folder, punch_cells, formulation, integration, gap=0.0, skin_sets=()):
     """The punch (`gap` above the plate, pressed 0.002 into it) on the plate (one element thick) named by the
-    touching faces, then by both bodies' whole skins: per description, this rank's owned displacements, the last
-    step's summary and its pair's entry."""
+    touching faces, then by both bodies' whole skins (with the --set changes skin_sets): per description, this
+    rank's owned displacements, the last step's summary and its pair's entry."""
     if comm.rank == 0:
         write_gmsh_box(folder / "plate.msh", None, (5, 5, 1), "hex", (0.0, 0.0, 0.0), (1.0, 1.0, 0.2))
         write_gmsh_box(folder / "punch.msh", None, punch_cells, "hex", (0.3, 0.3, 0.2 + gap), (0.4, 0.4, 0.4))
@@ -112,7 +112,7 @@ def skin_runs(comm, folder, punch_cells, formulation, integration, gap=0.0):
             (folder / f"s{k}.toml").write_text(SKIN_SCENE.format(slave=slave, master=master, uz=-0.002 - gap,
                                                                  formulation=formulation, integration=integration))
         comm.barrier()
-        run, summary = run_scene(folder / f"s{k}.toml", folder / f"o{k}", (), comm)
+        run, summary = run_scene(folder / f"s{k}.toml", folder / f"o{k}", skin_sets if k else (), comm)
         assert summary["status"] == "ok"
         step = summary["steps"][-1]
         out.append((run.local_displacement(run.u)[run.mesh.owned], step, next(iter(step["contact"].values()))))
@@ -139,6 +139,20 @@ def test_a_whole_skin_as_surface_gives_the_touching_faces_answer(comm, mpi_tmp, 
 
 
 @pytest.mark.parametrize("formulation", FORMULATIONS)
+def test_a_whole_skins_box_edges_on_the_other_surface_are_not_sharp(comm, mpi_tmp, formulation):
+    """feature_angle = 30 on the whole skins: the punch's box edges fold 45 degrees, but the face of theirs that
+    lies on the plate holds them (their faces turned towards the plate lean 0 degrees from it), so they keep
+    their segment rows and the answer is the touching faces' without feature rows (all its box edges' nodes took
+    nodal rows first: the force 1.7 % over)."""
+    (u0, _, pair0), (u1, _, pair1) = skin_runs(comm, mpi_tmp, (3, 3, 3), formulation, "segment",
+                                               skin_sets=["contact.0.feature_angle=30"])
+    scale = comm.allreduce(float(np.abs(u0).max(initial=0.0)), op=MPI.MAX)
+    assert comm.allreduce(float(np.abs(u1 - u0).max(initial=0.0)), op=MPI.MAX) <= 1e-10 * scale
+    assert pair1["rows"] == pair0["rows"]
+    assert pair1["total_normal_force"] == pytest.approx(pair0["total_normal_force"], rel=1e-8)
+
+
+@pytest.mark.parametrize("formulation", FORMULATIONS)
 @pytest.mark.parametrize("integration", ["segment", "nodal"])
 @pytest.mark.parametrize("punch_cells, gap", [((11, 11, 1), 0.0), ((4, 4, 20), 0.06)], ids=["tall", "thin"])
 def test_a_whole_skin_of_unequal_elements_gives_the_touching_faces_answer(comm, mpi_tmp, formulation, integration,
@@ -161,19 +175,28 @@ def test_a_whole_skin_of_unequal_elements_gives_the_touching_faces_answer(comm, 
     assert step1["reactions"][reaction][2] == pytest.approx(step0["reactions"][reaction][2], rel=1e-9)
 
 
-@pytest.mark.parametrize("formulation, integration, knife, held", [
-    ("master_slave", "segment", "slave", False), ("quasi_symmetric", "gauss", "slave", False),
-    ("quasi_symmetric", "nodal", "slave", False), ("master_slave", "nodal", "slave", True),
-    ("two_pass", "nodal", "slave", True), ("master_slave", "nodal", "master", False),
-    ("two_pass", "nodal", "master", True)])
-def test_a_knife_that_passes_through_its_rows_is_said(comm, mpi_tmp, formulation, integration, knife, held):
+KNIFE_HELD = 0.51375     # N: the knife's reaction for a 0.002 stroke when its edge's nodal rows hold it
+
+
+@pytest.mark.parametrize("formulation, integration, knife, held, feature_angle", [
+    ("master_slave", "segment", "slave", False, None), ("quasi_symmetric", "gauss", "slave", False, None),
+    ("quasi_symmetric", "nodal", "slave", False, None), ("master_slave", "nodal", "slave", True, None),
+    ("two_pass", "nodal", "slave", True, None), ("master_slave", "nodal", "master", False, None),
+    ("two_pass", "nodal", "master", True, None), ("master_slave", "segment", "slave", True, 30),
+    ("quasi_symmetric", "gauss", "slave", True, 30), ("quasi_symmetric", "nodal", "slave", True, 30),
+    ("two_pass", "segment", "slave", True, 30), ("master_slave", "nodal", "master", True, 30),
+    ("quasi_symmetric", "segment", "master", True, 30), ("master_slave", "segment", "slave", False, 50)])
+def test_a_knife_that_passes_through_its_rows_is_said(comm, mpi_tmp, formulation, integration, knife, held,
+                                                      feature_angle):
     """A knife (body "punch" of SKIN_SCENE: hexes 0.25 wide folded into a V whose faces stand 45 degrees from the
     plate) pressed 0.002 into the plate. Nodal rows of master_slave with the knife as slave, and of two_pass,
     hold its edge; segment and Gauss rows, whose weighted gaps average the edge's penetration with the gap
     opening beside it, quasi_symmetric's nodal rows and master_slave's with the knife as master let it through
     the whole stroke with no force. That ended "ok" with no word (hunt28_5 F4); the summary now gives the
     deepest penetration of a node without force, per side, and the log a warning whose advice fits the side
-    (hunt29_2: master nodes were told nodal master_slave would hold them)."""
+    (hunt29_2: master nodes were told nodal master_slave would hold them), feature_angle's included.
+    feature_angle below the faces' 45 degrees gives the edge's nodes nodal rows of their own with every
+    formulation and rule, on either side: the same reaction as the nodal rows that held it; above it, none."""
     from qsc_petsc import fem
     from qsc_petsc.meshgen import box_mesh
     if comm.rank == 0:
@@ -189,12 +212,14 @@ def test_a_knife_that_passes_through_its_rows_is_said(comm, mpi_tmp, formulation
                                                               formulation=formulation, integration=integration))
     comm.barrier()
     lines = []
-    run, summary = run_scene(mpi_tmp / "knife.toml", mpi_tmp / "o", (), comm, log=lines.append)
+    sets = [f"contact.0.feature_angle={feature_angle}"] if feature_angle else []
+    run, summary = run_scene(mpi_tmp / "knife.toml", mpi_tmp / "o", sets, comm, log=lines.append)
     run.destroy()
     assert summary["status"] == "ok"
     pair = next(iter(summary["steps"][-1]["contact"].values()))
     warned = [line for line in lines if "no row holds them" in line]
     if held:
+        assert summary["steps"][-1]["reactions"]["boundary[0] plate.zmin"][2] == pytest.approx(KNIFE_HELD, rel=1e-4)
         assert pair["total_normal_force"] > 0.4 and pair[f"max_penetration_{knife}"] < 1e-6
         assert pair["max_penetration_unforced_slave"] == pair["max_penetration_unforced_master"] == 0.0
         assert not warned
@@ -205,6 +230,61 @@ def test_a_knife_that_passes_through_its_rows_is_said(comm, mpi_tmp, formulation
         cure = ("nodal rows of master_slave or two_pass hold it" if knife == "slave" else
                 "master_slave never holds the master's nodes")
         assert all(f": {knife} nodes with no contact force" in line and cure in line for line in warned)
+        advice = "below the tilt of the edge's faces" if feature_angle is None else "feature_angle = 50 gave"
+        assert all(advice in line for line in warned)
+
+
+def test_feature_nodes_are_the_ridges_sharper_than_the_angle(comm, mpi_tmp):
+    """feature_nodes on a cube's whole skin (4 x 4 x 4 hexes): the 8 corners (their faces tilt 54.7 degrees from the
+    corner's normal) and the 12 edges' 3 inner nodes each (45 degrees) at 30 degrees, the corners alone at 50; none
+    on the plate's flat top, whose border nodes have faces on one side only."""
+    from qsc_petsc.contact.model import feature_nodes
+    if comm.rank == 0:
+        write_gmsh_box(mpi_tmp / "plate.msh", None, (5, 5, 1), "hex", (0.0, 0.0, 0.0), (1.0, 1.0, 0.2))
+        write_gmsh_box(mpi_tmp / "punch.msh", None, (4, 4, 4), "hex", (0.3, 0.3, 0.2), (0.4, 0.4, 0.4))
+        (mpi_tmp / "s.toml").write_text(SKIN_SCENE.format(slave="punch.boundary", master="plate.zmax", uz=-0.002,
+                                                          formulation="master_slave", integration="segment"))
+    comm.barrier()
+    run, _ = run_scene(mpi_tmp / "s.toml", mpi_tmp / "o", ["contact.0.feature_angle=30"], comm)
+    pd = run.contact.pairs[0]
+    counts = [comm.allreduce(int(feature_nodes(run.mesh, S, np.radians(angle)).sum()), op=MPI.SUM)
+              for S in (pd["slave"], pd["master"]) for angle in (30, 50)]
+    run.destroy()
+    assert counts == [8 + 12 * 3, 8, 0, 0]
+
+
+def test_a_cubes_corner_is_held_by_its_feature_row(comm, mpi_tmp):
+    """A cube (4 x 4 x 4 hexes, its whole skin the slave) stood on a corner and pressed 0.002 into a plate with
+    segment rows: its corner passes through with no force, as a knife's edge does; with feature_angle = 50 (the
+    corners alone: 54.7 degrees) the corner's nodal row holds it, with the reaction of nodal master_slave rows (to the
+    penalty's share: quasi_symmetric's rows take phi = 1/2)."""
+    from qsc_petsc import fem
+    from qsc_petsc.meshgen import box_mesh
+    if comm.rank == 0:
+        write_gmsh_box(mpi_tmp / "plate.msh", None, (8, 8, 2), "hex", (0.0, 0.0, 0.0), (1.0, 1.0, 0.2))
+        box = box_mesh((-0.2, -0.2, -0.2), (0.4, 0.4, 0.4), (4, 4, 4), "hex")
+        a, c = np.array([1.0, 1.0, 1.0]) / np.sqrt(3.0), 1.0 / np.sqrt(3.0)   # the diagonal turned onto z
+        v = np.cross(a, [0.0, 0.0, 1.0])
+        K = np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+        x = box.points @ (np.eye(3) + K + K @ K / (1.0 + c)).T
+        x += [0.5 + 3.7e-4, 0.5 + 2.1e-4, 0.2 - x[:, 2].min()]
+        write_gmsh(mpi_tmp / "punch.msh", x, box.cells, "hex", {
+            side: fem.cell_faces("hex", box.cells[box.surfaces[side][:, 0]], box.surfaces[side][:, 1])
+            for side in box.surfaces})
+        (mpi_tmp / "s.toml").write_text(SKIN_SCENE.format(slave="punch.boundary", master="plate.zmax", uz=-0.002,
+                                                          formulation="quasi_symmetric", integration="segment")
+                                        .replace('surface = "punch.zmax"', 'surface = "punch.xmax"'))
+    comm.barrier()
+    reaction = []
+    for k, sets in enumerate(([], ["contact.0.feature_angle=50"],
+                              ["contact.0.formulation=master_slave", "contact.0.integration=nodal"])):
+        run, summary = run_scene(mpi_tmp / "s.toml", mpi_tmp / f"o{k}", sets, comm)
+        run.destroy()
+        pair = next(iter(summary["steps"][-1]["contact"].values()))
+        assert (pair["max_penetration_unforced_slave"] > 1e-3) == (k == 0)
+        reaction.append(summary["steps"][-1]["reactions"]["boundary[0] plate.zmin"][2])
+    assert reaction[0] == 0.0 and reaction[2] > 0.04
+    assert reaction[1] == pytest.approx(reaction[2], rel=1e-4)      # phi 1/2 against 1: a softer row, 2.8e-5
 
 
 DIE_SKIN_SCENE = """
