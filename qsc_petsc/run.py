@@ -133,6 +133,7 @@ class Run:
         self.out = prepare_output(scene, out_dir, comm)
         self.from_scene = options.insert_options(scene.petsc)
         self.destroyed = False
+        self.round_off_said = set()      # pairs whose augmented Lagrangian ended on its round-off, said once
         try:
             self._build(scene, comm)
         except BaseException as exc:
@@ -347,6 +348,15 @@ class Run:
                            "the linear solves' round-off lies there, and the reactions may be off by as much")
                     self.log(f"step {step}: warning: the solve stopped on its Newton steps (below stol x |u|) with "
                              f"the residual at {floor:.2g} of its force scale: {why}")
+                settled = last.get("multipliers_at_round_off")
+                if settled and settled[0] not in self.round_off_said:
+                    self.round_off_said.add(settled[0])
+                    name, change, tol, bound = settled
+                    self.log(f"step {step}: warning: the augmented Lagrangian's updates of {name} ended on their "
+                             f"round-off: they still changed its multipliers by {change:.2g} (relative), above its "
+                             f"augmented_tolerance {tol:g}, and could go no lower (round-off {bound:.2g}: eps_n x "
+                             f"the displacements' precision, from its penalty); the answer holds to that. A lower "
+                             f"penalty meets the tolerance: the augmented Lagrangian needs no stiff one")
                 # both counts over every try of the step, cut back or not (the summary's snes/ksp_iterations)
                 self.log(f"step {step}/{n_steps}: load factor {t:.4g}, {record['snes_iterations']} Newton / "
                          f"{record['ksp_iterations']} Krylov iterations, "

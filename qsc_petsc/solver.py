@@ -30,6 +30,12 @@ MUMPS_MEMORY_ERRORS = (-19, -13)
 # the part of a rank's share of its node's available memory that a MUMPS factorization may take by default
 # (ICNTL(23), System._mumps_memory_cap): the rest is for the matrix, vectors and the solve's own arrays
 MUMPS_MEMORY_SHARE = 0.9
+# the augmented Lagrangian's updates end when they change the multipliers by at most a pair's augmented_tolerance or
+# by this many times their round-off, eps_n eps |u| (ConstraintTerm.next_multipliers), whichever is larger: the
+# changes stood at 0.3-1x that estimate for ever (patch test at alpha 1e4 / 1e8 / 1e10: 0.8-1.9e-11 / 0.8-1.0e-7 /
+# 0.9-1.2e-5 against 1.55e-11 / 1.55e-7 / 1.55e-5; hertz_coarse at 1e6-1e10 0.2-0.5x), and a run at alpha 1e10
+# stopped with AUGMENTED_LAGRANGIAN_MAX_IT at the default tolerance 1e-6 (hunt30_2)
+AUGMENTED_ROUND_OFF = 10.0
 # the augmented Lagrangian: rows whose area W is below this fraction of the term's largest keep no multiplier
 AUGMENTED_SLIVER = 1e-3
 KSP_MAX_IT = 2000              # Krylov iterations per linear solve unless -qsc_ksp_max_it says otherwise
@@ -129,6 +135,7 @@ class ConstraintTerm:
     def evaluate(self, u):
         """Row values, multipliers and active set at u (collective)."""
         c = self.row_values(u)
+        self.u_size = u.norm(PETSc.NormType.NORM_INFINITY)
         tol = self.closed_tol
         if self.start == START_REACH:
             tol = np.full(len(c), np.inf)
@@ -195,7 +202,7 @@ class ConstraintTerm:
 
     def next_multipliers(self):
         """The augmented Lagrangian's Uzawa step from the last evaluate, not applied: (new multipliers, their
-        relative change) (collective). Left unapplied once every term has settled, the answer keeps the
+        relative change, the round-off bound of that change) (collective). Left unapplied once every term has settled, the answer keeps the
         multipliers it was solved with, so that its contact forces balance the bodies' (an applied update
         would add its change to the forces reported at the same displacement)."""
         c = self.c.getArray()[self.rows]
@@ -213,7 +220,12 @@ class ConstraintTerm:
         # ends touching with no force (unloaded, or a gap closed exactly) has round-off multipliers, whose
         # relative change stayed at 0.2-1.6 for 200 updates (a pair pulled apart, every formulation and rule)
         size = max(size, count * self.pressure_floor ** 2)
-        return new, (np.sqrt(change / size) if size > 0 else 0.0)
+        if size == 0:
+            return new, 0.0, 0.0
+        # the rows' round-off, eps |u| in C / W, is eps_n eps |u| in a multiplier: relative to their rms, the
+        # change below which the updates cannot go (AUGMENTED_ROUND_OFF)
+        bound = AUGMENTED_ROUND_OFF * self.eps_n * np.finfo(float).eps * self.u_size / np.sqrt(size / count)
+        return new, np.sqrt(change / size), bound
 
 
 def new_snes(comm, max_it):
@@ -998,28 +1010,37 @@ def _merge(stats, more):
                                        "round_off_floor")})
     if "multipliers_unsettled" in more:     # the outcome's: why a later solve of the try failed
         stats["multipliers_unsettled"] = more["multipliers_unsettled"]
+    stats["multipliers_at_round_off"] = more.get("multipliers_at_round_off")     # the answer's multipliers'
 
 
 def _solve_enforced(system, step, t, start, augmented_max):
     """One solve at load factor t from `start`, then, with augmented Lagrangian terms, multiplier updates and
     solves until the next update would change every term's multipliers by at most its augmented_tolerance
     (that update is left unapplied: ConstraintTerm.next_multipliers), at most augmented_max updates applied;
-    returns (ok, u, stats), stats["augmented_iterations"] the updates computed (the applied ones and the test)."""
+    returns (ok, u, stats), stats["augmented_iterations"] the updates computed (the applied ones and the test),
+    stats["multipliers_at_round_off"] (name, change, tolerance, round-off bound) of the pair furthest above its
+    tolerance when the updates ended on their round-off instead (AUGMENTED_ROUND_OFF), else None."""
     ok, u_new, stats = _solve_at(system, step, t, start)
     augmented = [term for term in system.terms if term.augmented]
+    stats["multipliers_at_round_off"] = None
     outer = 0
     while ok and augmented:
         steps = [(term, *term.next_multipliers()) for term in augmented]
         outer += 1
-        if all(change <= term.augmented_tolerance for term, _, change in steps):
+        if all(change <= max(term.augmented_tolerance, bound) for term, _, change, bound in steps):
+            # a tolerance under the multipliers' round-off is met at that round-off, and said (Run)
+            over = [(term.name, change, term.augmented_tolerance, bound) for term, _, change, bound in steps
+                    if change > term.augmented_tolerance]
+            if over:
+                stats["multipliers_at_round_off"] = max(over, key=lambda entry: entry[1] / entry[2])
             break
         if outer > augmented_max:          # augmented_max updates applied, and this one's test not met
             ok = False
             stats["snes_reason"] = "AUGMENTED_LAGRANGIAN_MAX_IT"
-            term, _, change = max(steps, key=lambda step: step[2] / step[0].augmented_tolerance)
+            term, _, change, _ = max(steps, key=lambda step: step[2] / step[0].augmented_tolerance)
             stats["multipliers_unsettled"] = (term.name, change, term.augmented_tolerance)
             break
-        for term, new, _ in steps:
+        for term, new, _, _ in steps:
             term.lmbda = new
         ok, u_new, more = _solve_at(system, step, t, u_new)
         _merge(stats, more)
@@ -1108,8 +1129,7 @@ def solve_load_step(system, step, t_prev, t_target, u, update_terms, max_cutback
                 why = (f"; the multipliers of {name} still changed by {change:.2g} (relative; its "
                        f"augmented_tolerance {tol:g}) after {augmented_max} updates: raise "
                        f"{name}.augmented_max_iterations, or its penalty (the updates converge the faster the "
-                       f"stiffer it is)" + ("; a tolerance below 1e-12 may be under the solve's round-off"
-                                            if tol < 1e-12 else ""))
+                       f"stiffer it is)")
             if stats["snes_reason"] == "OUT_OF_REACH":
                 what = stats["out_of_reach"]
                 why = (f"; {what} out of the die's reach at the increment's start went through it "

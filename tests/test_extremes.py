@@ -62,6 +62,30 @@ def test_a_solve_that_stops_on_its_round_off_says_how_far_off_it_stands(tmp_path
         assert abs(force - 1.0) > 1e-2 if warned else force == pytest.approx(1.0, rel=1e-6)
 
 
+def test_augmented_lagrangian_at_a_stiff_penalty_ends_on_its_round_off(tmp_path):
+    """The augmented Lagrangian on the matching patch test: at alpha 1e10 the updates' change stands at ~1e-5 for
+    ever (eps_n eps |u|, the rows' round-off), above the default tolerance 1e-6; every cutback repeated them and the
+    run stopped with AUGMENTED_LAGRANGIAN_MAX_IT, advising more updates or a stiffer penalty (hunt30_2). The
+    updates now end at 10x that round-off, with a warning that names the pair and says so; sigma_zz = -p to the
+    penalty run's accuracy. At alpha 1e4 they meet the tolerance, and a tolerance of 1e-14 is met at the
+    round-off, said the same way."""
+    base = ["contact.0.enforcement=augmented_lagrangian", "bodies.1.mesh.cells=[4,4,2]"]
+    for k, (sets, warned) in enumerate(((["contact.0.penalty=1e10"], True), (["contact.0.penalty=1e4"], False),
+                                        (["contact.0.augmented_tolerance=1e-14"], True))):
+        lines = []
+        run, summary = run_scene(CONFIGS / "patch_test.toml", tmp_path / str(k), base + sets, log=lines.append)
+        assert summary["status"] == "ok"
+        _, cell, _ = run.fields(run.u)
+        assert np.abs(cell["stress"][:, 2] + 1.0).max() <= (1e-6 if k == 0 else 1e-10)
+        run.destroy()
+        solve = summary["steps"][-1]["solves"][-1]
+        said = [line for line in lines if "updates of contact[0] ended on their round-off" in line]
+        assert len(said) == warned and (solve["multipliers_at_round_off"] is not None) == warned
+        if warned:
+            name, change, tol, bound = solve["multipliers_at_round_off"]
+            assert name == "contact[0]" and tol < change <= bound
+
+
 def test_conditioning_grows_linearly_with_alpha():
     """The Jacobian's 2-norm condition number (dense SVD on the free dofs) shall grow like alpha: the penalty
     is the stiffest term, and nothing else degrades."""
