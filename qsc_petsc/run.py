@@ -17,7 +17,7 @@ from .errors import OutputError, QscError, SceneError
 from .mesh import distribute_mesh, on_root
 from .output import ResultWriter, check_output_folder, clear_results, write_json, write_on_root
 from .restraint import Restraint, describe
-from .solver import ROUND_OFF_WARNING, System, solve_load_step
+from .solver import AUGMENTED_ROUND_OFF, ROUND_OFF_WARNING, System, solve_load_step
 
 # Runs built and not yet destroyed, as weak references in creation order (the same order on every rank).
 _LIVE_RUNS = []
@@ -354,9 +354,10 @@ class Run:
                     name, change, tol, bound = settled
                     self.log(f"step {step}: warning: the augmented Lagrangian's updates of {name} ended on their "
                              f"round-off: they still changed its multipliers by {change:.2g} (relative), above its "
-                             f"augmented_tolerance {tol:g}, and could go no lower (round-off {bound:.2g}: eps_n x "
-                             f"the displacements' precision, from its penalty); the answer holds to that. A lower "
-                             f"penalty meets the tolerance: the augmented Lagrangian needs no stiff one")
+                             f"augmented_tolerance {tol:g} but within {AUGMENTED_ROUND_OFF:g}x the multipliers' "
+                             f"round-off (eps_n times the rows' precision: {bound / AUGMENTED_ROUND_OFF:.2g}), below which no update can go; the answer "
+                             f"holds to that. A lower penalty meets the tolerance: the augmented Lagrangian needs no "
+                             f"stiff one")
                 # both counts over every try of the step, cut back or not (the summary's snes/ksp_iterations)
                 self.log(f"step {step}/{n_steps}: load factor {t:.4g}, {record['snes_iterations']} Newton / "
                          f"{record['ksp_iterations']} Krylov iterations, "

@@ -31,10 +31,11 @@ MUMPS_MEMORY_ERRORS = (-19, -13)
 # (ICNTL(23), System._mumps_memory_cap): the rest is for the matrix, vectors and the solve's own arrays
 MUMPS_MEMORY_SHARE = 0.9
 # the augmented Lagrangian's updates end when they change the multipliers by at most a pair's augmented_tolerance or
-# by this many times their round-off, eps_n eps |u| (ConstraintTerm.next_multipliers), whichever is larger: the
-# changes stood at 0.3-1x that estimate for ever (patch test at alpha 1e4 / 1e8 / 1e10: 0.8-1.9e-11 / 0.8-1.0e-7 /
-# 0.9-1.2e-5 against 1.55e-11 / 1.55e-7 / 1.55e-5; hertz_coarse at 1e6-1e10 0.2-0.5x), and a run at alpha 1e10
-# stopped with AUGMENTED_LAGRANGIAN_MAX_IT at the default tolerance 1e-6 (hunt30_2)
+# by this many times their round-off (the rms over the rows that hold a multiplier of eps_n eps (|G| |u| + |g|) / W,
+# relative to the multipliers': ConstraintTerm.next_multipliers), whichever is larger. The changes stood at
+# 0.5-1.2x that estimate for ever (patch test at alpha 1e4 / 1e8 / 1e10: 0.8-1.9e-11 / 0.8-1.0e-7 / 0.9-1.2e-5
+# against 1.55e-11 / 1.55e-7 / 1.55e-5; hertz_coarse at 1e6-1e10 and Gauss and nodal rows at 1e9 alike), and a run
+# at alpha 1e10 stopped with AUGMENTED_LAGRANGIAN_MAX_IT at the default tolerance 1e-6 (hunt30_2)
 AUGMENTED_ROUND_OFF = 10.0
 # the augmented Lagrangian: rows whose area W is below this fraction of the term's largest keep no multiplier
 AUGMENTED_SLIVER = 1e-3
@@ -100,6 +101,7 @@ class ConstraintTerm:
         # G scaled by the rows' stiffnesses and G^T diag(d) G, kept so that each Jacobian redoes only the
         # product's numeric part (System._jacobian)
         self.DG = self.product = None
+        self.G_abs, self.scale = None, None      # the augmented Lagrangian's round-off (_row_scale)
         # the d the product holds (None once it is changed in place); its pattern (G^T G's) and the pattern's digest
         self.product_d = self.pattern = self.pattern_digest = None
         w = W.getArray()
@@ -132,10 +134,26 @@ class ConstraintTerm:
         self.c.axpy(-1.0, self.g)
         return self.c.getArray()[self.rows]
 
+    def _row_scale(self, u):
+        """self.scale: |G| |u| + |g| on the existing rows, the size of the terms whose sum C is (collective)."""
+        if self.G_abs is None:
+            self.G_abs = self.G.copy()
+            ia, ja, a = self.G_abs.getValuesCSR()
+            self.G_abs.setValuesCSR(ia, ja, np.abs(a))
+            self.G_abs.assemble()
+        ua = u.copy()
+        ua.abs()
+        out = self.G.createVecLeft()
+        self.G_abs.mult(ua, out)
+        self.scale = out.getArray()[self.rows] + np.abs(self.g.getArray()[self.rows])
+        for v in (ua, out):
+            v.destroy()
+
     def evaluate(self, u):
         """Row values, multipliers and active set at u (collective)."""
         c = self.row_values(u)
-        self.u_size = u.norm(PETSc.NormType.NORM_INFINITY)
+        if self.augmented:
+            self._row_scale(u)
         tol = self.closed_tol
         if self.start == START_REACH:
             tol = np.full(len(c), np.inf)
@@ -196,15 +214,15 @@ class ConstraintTerm:
         return self.pattern_digest
 
     def destroy(self):
-        for mat in (self.G, self.DG, self.product):
+        for mat in (self.G, self.DG, self.product, self.G_abs):
             if mat is not None:
                 mat.destroy()
 
     def next_multipliers(self):
         """The augmented Lagrangian's Uzawa step from the last evaluate, not applied: (new multipliers, their
-        relative change, the round-off bound of that change) (collective). Left unapplied once every term has settled, the answer keeps the
-        multipliers it was solved with, so that its contact forces balance the bodies' (an applied update
-        would add its change to the forces reported at the same displacement)."""
+        relative change, the change's round-off bound, AUGMENTED_ROUND_OFF) (collective). Left unapplied once every
+        term has settled, the answer keeps the multipliers it was solved with, so that its contact forces balance
+        the bodies' (an applied update would add its change to the forces reported at the same displacement)."""
         c = self.c.getArray()[self.rows]
         W = self.W.getArray()[self.rows]
         new = multipliers_update(self.lmbda, c, W, self.eps_n, self.gate_of)
@@ -213,18 +231,21 @@ class ConstraintTerm:
         # elements around it for Uzawa, whose multiplier then grew by the same step at every update (the sliding
         # cubes at load factor 0.375, a slave node 1 mm past the other cube's edge: W 3.8e-5 of the largest, 1200
         # Pa an update, the pair's loop stopped after 25 with its change at 2 %)
-        new[W < AUGMENTED_SLIVER * comm.allreduce(float(W.max(initial=0.0)), op=MPI.MAX)] = 0.0
-        change, size, count = comm.allreduce(
-            np.array([np.sum((new - self.lmbda) ** 2), np.sum(new ** 2), len(new)], dtype=float), op=MPI.SUM)
+        sliver = W < AUGMENTED_SLIVER * comm.allreduce(float(W.max(initial=0.0)), op=MPI.MAX)
+        new[sliver] = 0.0
+        # the rows' round-off, eps (|G| |u| + |g|) in C, is eps_n eps (|G| |u| + |g|) / W in a multiplier: on the
+        # rows that hold one, the floor of the updates' change (AUGMENTED_ROUND_OFF)
+        held = ~sliver & ((new > 0) | (self.lmbda > 0))
+        noise = np.sum((self.eps_n * np.finfo(float).eps * self.scale[held] / W[held]) ** 2)
+        change, size, count, noise = comm.allreduce(
+            np.array([np.sum((new - self.lmbda) ** 2), np.sum(new ** 2), len(new), noise], dtype=float), op=MPI.SUM)
         # relative to the multipliers, or to pressure_floor on every row where they are smaller: a contact that
         # ends touching with no force (unloaded, or a gap closed exactly) has round-off multipliers, whose
         # relative change stayed at 0.2-1.6 for 200 updates (a pair pulled apart, every formulation and rule)
         size = max(size, count * self.pressure_floor ** 2)
         if size == 0:
             return new, 0.0, 0.0
-        # the rows' round-off, eps |u| in C / W, is eps_n eps |u| in a multiplier: relative to their rms, the
-        # change below which the updates cannot go (AUGMENTED_ROUND_OFF)
-        bound = AUGMENTED_ROUND_OFF * self.eps_n * np.finfo(float).eps * self.u_size / np.sqrt(size / count)
+        bound = AUGMENTED_ROUND_OFF * np.sqrt(noise / size)
         return new, np.sqrt(change / size), bound
 
 
