@@ -133,14 +133,20 @@ def random_warped_quad(rng):
     return x
 
 
-def test_projection_recovers_xi_on_warped_quads():
-    """Points off a warped quad along its normal at xi shall project back to xi, at distance |t|, inside."""
-    rng = np.random.default_rng(1)
-    faces = np.array([random_warped_quad(rng) for _ in range(200)])
-    xi = rng.uniform(-0.95, 0.95, (200, 2))
+def warped_quads_and_points(rng, count=200):
+    """count random warped quads, natural coordinates xi inside each, the shape values, points and normals there."""
+    faces = np.array([random_warped_quad(rng) for _ in range(count)])
+    xi = rng.uniform(-0.95, 0.95, (count, 2))
     N, _ = fem.shape_quad(xi)
     on = np.einsum("pv,pvi->pi", N, faces)
     n = np.array([fem.face_normals("quad", f[None], x[None])[0][0, 0] for f, x in zip(faces, xi)])
+    return faces, xi, N, on, n
+
+
+def test_projection_recovers_xi_on_warped_quads():
+    """Points off a warped quad along its normal at xi shall project back to xi, at distance |t|, inside."""
+    rng = np.random.default_rng(1)
+    faces, xi, N, on, n = warped_quads_and_points(rng)
     t = rng.uniform(-0.05, 0.05, 200)
     pr = project_on_faces(on + t[:, None] * n, faces, "quad")
     np.testing.assert_allclose(pr.xi, xi, atol=1e-11)
@@ -157,12 +163,7 @@ def test_projection_on_quads_far_from_the_origin(offset):
     coordinates' own round-off (eps x offset). The Newton residual read x(xi) - p from the coordinates, whose
     round-off (eps |x| / h in xi) kept its steps above NEWTON_TOL at |x| / h ~ 500 and more: the points went to the
     edges, and their rows away (a body 1000 m off lost 16 % of its rows; hunt30_1)."""
-    rng = np.random.default_rng(3)
-    faces = np.array([random_warped_quad(rng) for _ in range(200)])
-    xi = rng.uniform(-0.95, 0.95, (200, 2))
-    N, _ = fem.shape_quad(xi)
-    on = np.einsum("pv,pvi->pi", N, faces)
-    n = np.array([fem.face_normals("quad", f[None], x[None])[0][0, 0] for f, x in zip(faces, xi)])
+    faces, xi, _, on, n = warped_quads_and_points(np.random.default_rng(3))
     shift = offset * np.array([1.0, -0.6, 0.3])
     pr = project_on_faces(on + 0.03 * n + shift, faces + shift, "quad")
     assert pr.inside.all()
