@@ -1071,10 +1071,15 @@ def contact_plan(mesh, scene, held=None):
     for pd, term in zip(model.pairs, terms):
         spec = pd["spec"]
         rows = mesh.comm.allreduce(len(term.rows), op=MPI.SUM)
+        features = ""
+        if pd["features"] is not None:
+            ridges = [mesh.comm.allreduce(int(pd["features"][side].sum()), op=MPI.SUM) for side in ("slave", "master")]
+            features = (f", {term.feature_rows} of them feature rows (feature_angle {spec.feature_angle:g}: "
+                        f"{ridges[0]} slave and {ridges[1]} master nodes on ridges that sharp)")
         lines.append(f"contact[{pd['index']}]: {spec.slave} (slave) / {spec.master} (master), {spec.formulation}, "
                      f"{spec.enforcement}; h_eff {pd['h_eff']:.4g} m, eps_n {pd['eps_n']:.4g} Pa/m, "
                      f"search radius {pd['radius']:.4g} m, {spec.sliding} sliding ({_searched(spec)}); {rows} "
-                     f"candidate rows at the first search")
+                     f"candidate rows at the first search{features}")
     for dd, term in zip(model.dies, terms[len(model.pairs):]):
         spec = dd["spec"]
         rows = mesh.comm.allreduce(len(term.rows), op=MPI.SUM)
