@@ -37,6 +37,11 @@ MUMPS_MEMORY_SHARE = 0.9
 # against 1.55e-11 / 1.55e-7 / 1.55e-5; hertz_coarse at 1e6-1e10 and Gauss and nodal rows at 1e9 alike), and a run
 # at alpha 1e10 stopped with AUGMENTED_LAGRANGIAN_MAX_IT at the default tolerance 1e-6 (hunt30_2)
 AUGMENTED_ROUND_OFF = 10.0
+# ... but no higher than this: a round-off that large leaves the updates nothing to do (the multipliers are
+# their penalty's), and the loop runs on to augmented_max_iterations and says so. The rows' own displacements
+# set it, not another body's (hunt30_4: a free body moved 1e12 m set the first bound at 1.2 and the loop stopped
+# at the penalty's answer, 9.4 % off)
+AUGMENTED_ROUND_OFF_CAP = 1e-3
 # the augmented Lagrangian: rows whose area W is below this fraction of the term's largest keep no multiplier
 AUGMENTED_SLIVER = 1e-3
 KSP_MAX_IT = 2000              # Krylov iterations per linear solve unless -qsc_ksp_max_it says otherwise
@@ -245,7 +250,7 @@ class ConstraintTerm:
         size = max(size, count * self.pressure_floor ** 2)
         if size == 0:
             return new, 0.0, 0.0
-        bound = AUGMENTED_ROUND_OFF * np.sqrt(noise / size)
+        bound = min(AUGMENTED_ROUND_OFF * np.sqrt(noise / size), AUGMENTED_ROUND_OFF_CAP)
         return new, np.sqrt(change / size), bound
 
 
