@@ -691,15 +691,21 @@ def _check_one_value(mesh, scene, vals, where, first_of):
                          f"{', '.join(f'{c:.4g}' for c in x)}: a node takes one value per component")
 
 
-def symmetry_axis(mesh, index, surface):
-    """The axis normal to an axis-aligned symmetry surface (collective: all ranks agree)."""
+def plane_axis(mesh, surface):
+    """The axis (0, 1, 2) a surface is a plane normal to, or None (collective: all ranks agree)."""
     c, lf = mesh.surface_faces(surface)
     xf = mesh.coords[mesh.face_nodes(c, lf)]
     n = fem.centroid_normals(mesh.face_type, xf)
     total = mesh.comm.allreduce(np.abs(n).sum(axis=0) if len(n) else np.zeros(3), op=MPI.SUM)
     count = mesh.comm.allreduce(len(n), op=MPI.SUM)
     axis = int(np.argmax(total))
-    if count == 0 or total[axis] < count * (1.0 - 1e-9):
+    return None if count == 0 or total[axis] < count * (1.0 - 1e-9) else axis
+
+
+def symmetry_axis(mesh, index, surface):
+    """The axis normal to an axis-aligned symmetry surface (collective: all ranks agree)."""
+    axis = plane_axis(mesh, surface)
+    if axis is None:
         raise MeshError(f"boundary[{index}].surface: symmetry surface {surface!r} is not a plane "
                         f"normal to x, y or z")
     return axis

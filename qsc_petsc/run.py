@@ -166,6 +166,8 @@ class Run:
         if scene.contact or scene.die:
             from .contact.model import ContactModel
             self.contact = ContactModel(mesh, scene, mesh.dof_vector(), self.phases)
+            for line in self.contact.precision_warnings():
+                self.log(f"warning: {line}")
             # the first increment's search comes first: K's pattern holds its contact stencil (set_terms)
             extra, stencil_digests = self.contact.prepare(1.0 / scene.load.steps)
         with self.phases("assembly"):

@@ -134,13 +134,39 @@ def _corner_angles(xf):
     return np.arccos(np.clip(cos, -1.0, 1.0))
 
 
-def feature_nodes(mesh, S, angle):
+def symmetry_components(mesh, scene):
+    """(local vertices, 3) bools: the components normal to the symmetry planes that each vertex lies on: the
+    boundaries of type "symmetry", and the displacement boundaries that hold a plane's normal component at 0 and
+    leave the others free, which are the same condition (collective)."""
+    on = np.zeros((len(mesh.coords), 3), dtype=bool)
+    extent = mesh.comm.allreduce(float(np.abs(mesh.coords).max(initial=0.0)), op=MPI.MAX)
+    for bc in scene.boundary:
+        if bc.type == "displacement":
+            values = (bc.ux, bc.uy, bc.uz)
+            held = [k for k, value in enumerate(values) if value is not None]
+            if len(held) != 1 or values[held[0]] != 0.0:
+                continue
+        elif bc.type != "symmetry":
+            continue
+        axis = assembly.plane_axis(mesh, bc.surface)
+        if axis is None or (bc.type == "displacement" and axis != held[0]):
+            continue
+        v = mesh.surface_vertices(bc.surface)
+        total, count = mesh.comm.allreduce(np.array([mesh.coords[v, axis].sum(), len(v)]), op=MPI.SUM)
+        plane = total / max(count, 1.0)
+        on[:, axis] |= np.abs(mesh.coords[:, axis] - plane) <= 1e-9 * max(extent, 1e-300)
+    return on
+
+
+def feature_nodes(mesh, S, angle, mirrored=None):
     """A mask over S's owned nodes: those where S folds convexly by more than `angle` (radians) in the reference
     configuration, the sharp edges and corners that weighted gaps let through (contact[].feature_angle). A node's
     faces tilt from its angle-weighted normal m by arccos(|sum w n_f| / sum w) on average (w: the faces' angles at
     the node, n_f their centroid normals): 45 degrees on a box's edge, 54.7 at its corner, a knife's faces' tilt
     from its edge's normal; the fold is convex when the faces' centroids lie behind the node along m, as on a
-    ridge, not in a valley. Sums over ranks, so the same nodes on any number of them. Collective."""
+    ridge, not in a valley. mirrored (symmetry_components): on a symmetry plane the faces' mirror images count
+    too, so the components normal to it drop out of both sums (a half knife's edge, with one face of its own, read
+    no fold at all; hunt30_3). Sums over ranks, so the same nodes on any number of them. Collective."""
     xf = mesh.coords[S.faces]
     nv = S.faces.shape[1]
     values = np.zeros((len(S.faces), nv, 3, 3))      # per face node: w n_f, w (c_f - x_k), (w, 0, 0)
@@ -149,6 +175,8 @@ def feature_nodes(mesh, S, angle):
         values[..., 0, :] = w[:, :, None] * fem.centroid_normals(mesh.face_type, xf)[:, None, :]
         values[..., 1, :] = w[:, :, None] * (xf.mean(axis=1)[:, None, :] - xf)
         values[..., 2, 0] = w
+        if mirrored is not None:
+            values[..., :2, :] *= ~mirrored[S.faces][:, :, None, :]
     m, behind, total = (_nodal_sums(mesh, S.faces, values[..., j, :], S.nodes, S.template) for j in range(3))
     total = total[:, 0]
     size = np.linalg.norm(m, axis=1)
@@ -277,14 +305,17 @@ def _turned_faces(mesh, S, X, U, which, found):
 
 def facing_lean(mesh, S, X, U, which, found):
     """For S's owned nodes `which`: the mean, over the node's faces turned towards the T face it found (weighted
-    by the node's reference areas on them), of the cosine between a face's normal and that T face's inward
-    normal -n_T: 1 where a face around the node lies parallel to the other surface, cos(theta) on a knife's edge
-    whose faces stand theta from it (1: a node that found no face). Collective."""
-    faced, now, nodal, away = _turned_faces(mesh, S, X, U, which, found)
+    by the node's reference areas on them), of the cosine between a face's reference normal and that T face's
+    inward normal -n_T: 1 where a face around the node lies parallel to the other surface, cos(theta) on a knife's
+    edge whose faces stand theta from it (1: a node that found no face). The reference normals: an edge that its
+    nodal row held up flattened its faces below the angle, lost its row and sank at every other step (hunt30_3).
+    Collective."""
+    faced, _, nodal, away = _turned_faces(mesh, S, X, U, which, found)
     turned = nodal * ((np.abs(faced).sum(axis=2) > 0) & ~away)
+    ref = fem.centroid_normals(mesh.face_type, X[S.faces]) if len(S.faces) else np.zeros((0, 3))
     values = np.zeros(nodal.shape + (3,))
     values[..., 0] = turned
-    values[..., 1] = turned * -np.einsum("ki,kvi->kv", now, faced)
+    values[..., 1] = turned * -np.einsum("ki,kvi->kv", ref, faced)
     sums = _nodal_sums(mesh, S.faces, values, S.nodes[which], S.template)
     return np.where(sums[:, 0] > 0, sums[:, 1] / np.where(sums[:, 0] > 0, sums[:, 0], 1.0), 1.0)
 
@@ -401,7 +432,11 @@ def contact_pairs_data(mesh, scene, template):
         features = None
         if pair.feature_angle is not None:
             angle = np.radians(pair.feature_angle)
-            features = {"slave": feature_nodes(mesh, S, angle), "master": feature_nodes(mesh, M, angle)}
+            mirrored = symmetry_components(mesh, scene)
+            features = {"slave": feature_nodes(mesh, S, angle, mirrored),
+                        "master": feature_nodes(mesh, M, angle, mirrored),
+                        "sharp": {"slave": np.zeros(len(S.nodes), dtype=bool),
+                                  "master": np.zeros(len(M.nodes), dtype=bool)}}
         pairs.append({"index": i, "spec": pair, "slave": S, "master": M, "h_eff": h_eff,
                       "eps_n": pair.penalty * E / h_eff, "radius": pair.search_distance * h_eff,
                       "features": features,
@@ -429,6 +464,11 @@ def die_data(mesh, scene, template):
     return dies
 
 
+# a pair's or die's gaps are differences of coordinates, known to eps |x|: far from the origin they are round-off
+# below that, and a penalty's penetrations (~1e-7 h at alpha 1e4) are lost in it. Said (precision_warnings) when
+# eps |x| passes this share of the pair's h_eff: the two cubes moved 1e6 m (eps |x| 3.4e-9 h) kept their answer,
+# 1e9 m (3.4e-6 h) read penetrations 2-15x off, 1e14 m 97 % off in displacement, each "ok" with no word (hunt30_4)
+COORDINATE_PRECISION = 1e-8
 # large sliding (ContactModel._relaxation): the bounds of Aitken's relaxation of the search configuration (1.5
 # before the edge band: two_pass with nodal rows in 16 steps on the sliding cubes crept by 0.87 a search at 1.5
 # and did not settle in 20; at 5 and 10 every slide of sliding_cubes, 3 formulations x 3 rules x 1 / 2 / 16
@@ -476,6 +516,24 @@ class ContactModel:
         # per large-sliding pair, over an increment's searches (settle, _relaxation): the configuration U last
         # searched at ("at"), the last residual U - at on the pair's surface nodes ("r") and its relaxation ("w")
         self.settling = {}
+
+    def precision_warnings(self):
+        """A line (in a list; none if all is well) naming the pairs and dies whose element size is within
+        1 / COORDINATE_PRECISION of the coordinates' precision, eps |x| (x: the mesh's node farthest from the
+        origin, or a die's point) (collective)."""
+        far = self.comm.allreduce(float(np.abs(self.mesh.coords).max(initial=0.0)), op=MPI.MAX)
+        far = max([far] + [float(np.abs(dd["spec"].point).max()) for dd in self.dies])
+        precision = np.finfo(float).eps * far
+        sizes = [(f"contact[{pd['index']}]", pd["h_eff"]) for pd in self.pairs] + [
+            (f"die[{dd['index']}]", dd["h"]) for dd in self.dies]
+        near = [f"{name} ({h:.3g} m: {precision / h:.2g})" for name, h in sizes if precision > COORDINATE_PRECISION * h]
+        if not near:
+            return []
+        line = (f"the scene reaches {far:.3g} m from the origin, where coordinates are known to {precision:.2g} m, a "
+                f"share of the element size of {', '.join(near)}: gaps and penetrations are round-off below that (a "
+                f"penalty's are ~1e-7 of the element size at alpha 1e4), and the answer may be off with no other "
+                f"sign; move the scene nearer the origin")
+        return [line]
 
     def _phase(self, name):
         from contextlib import nullcontext
@@ -577,6 +635,9 @@ class ContactModel:
             for S, T in ((pd["slave"], pd["master"]), (pd["master"], pd["slave"])):
                 if S is pd["slave"] and _no_own_weight(pd["spec"]):
                     continue                 # quasi_symmetric's slave at weight 0: its rows are the master's points'
+                if S is pd["master"] and pd["spec"].formulation != "two_pass":
+                    continue                 # its nodes are not held, but for feature rows (a sharp master's
+                    # others went on penetrating the slave, as master_slave lets them: OUT_OF_REACH; hunt30_3)
                 held = W[_owned_rows(mesh, S.nodes)] > 0
                 if not self.comm.allreduce(bool(held.any()), op=MPI.LOR):
                     continue                 # a side without rows (master_slave's master)
@@ -692,8 +753,11 @@ class ContactModel:
             fp, ok, found = project_pass(self.mesh, S, T, X, U, pd["radius"], pd["memo"][f"features_{side}"],
                                          which)
             # the ridge's faces that can meet the other surface lean away from it: a box's edge whose face lies
-            # on the other surface is held by that face's rows
-            sharp = S.nodes[which][ok & (facing_lean(self.mesh, S, X, U, which, found) < lean)]
+            # on the other surface is held by that face's rows. A node found so keeps its row for the run: at a
+            # threshold, rows that came and went made large sliding's searches cycle (hunt30_3)
+            held = pd["features"]["sharp"][side]
+            held[which] |= ok & (facing_lean(self.mesh, S, X, U, which, found) < lean)
+            sharp = S.nodes[which][ok & held[which]]
             passes.append(fp.subset(np.isin(fp.node, self.mesh.gvert[sharp])))
             ids.append(3 * self.mesh.gvert[sharp])
         ids = np.concatenate(ids) if ids else np.zeros(0, dtype=np.int64)
@@ -1085,6 +1149,7 @@ def contact_plan(mesh, scene, held=None):
         rows = mesh.comm.allreduce(len(term.rows), op=MPI.SUM)
         lines.append(f"die[{dd['index']}] {spec.name}: rigid plane, {spec.condition}, on {', '.join(spec.surfaces)}; "
                      f"eps_n {dd['eps_n']:.4g} Pa/m; {rows} candidate rows at the first search")
+    lines += [f"warning: {line}" for line in model.precision_warnings()]
     model.destroy()
     template.destroy()
     return lines

@@ -175,6 +175,90 @@ def test_a_whole_skin_of_unequal_elements_gives_the_touching_faces_answer(comm, 
     assert step1["reactions"][reaction][2] == pytest.approx(step0["reactions"][reaction][2], rel=1e-9)
 
 
+def write_knife(comm, folder, knife, formulation, integration, slope=1.0, half=False, stroke=0.002, steps=1):
+    """knife.toml, plate.msh and punch.msh in folder: the plate of SKIN_SCENE and a knife (hexes 0.25 wide folded
+    into a V whose faces rise `slope` from the edge, on the plate at x = 0.5), `knife` the slave or the master,
+    pressed `stroke` in `steps`; `half`: the half x >= 0.5 of both, held at ux = 0 there (a symmetry plane). Every
+    rank calls it."""
+    from qsc_petsc import fem
+    from qsc_petsc.meshgen import box_mesh
+    if comm.rank == 0:
+        write_gmsh_box(folder / "plate.msh", None, (3, 5, 1) if half else (5, 5, 1), "hex",
+                       (0.5 if half else 0.0, 0.0, 0.0), (0.6 if half else 1.0, 1.0, 0.2))
+        box = box_mesh((0.5 if half else 0.0, 0.0, 0.0), (0.5 if half else 1.0, 1.0, 1.5),
+                       (2 if half else 4, 2, 6), "hex")
+        x = box.points.copy()
+        x[:, 2] += slope * np.abs(x[:, 0] - 0.5) * (1.0 - x[:, 2] / 1.5) + 0.2
+        write_gmsh(folder / "punch.msh", x, box.cells, "hex", {
+            side: fem.cell_faces("hex", box.cells[box.surfaces[side][:, 0]], box.surfaces[side][:, 1])
+            for side in box.surfaces})
+        roles = ("punch.zmin", "plate.zmax") if knife == "slave" else ("plate.zmax", "punch.zmin")
+        text = SKIN_SCENE.format(slave=roles[0], master=roles[1], uz=-stroke, formulation=formulation,
+                                 integration=integration) + f"[load]\nsteps = {steps}\n"
+        if half:
+            text += "".join(f'[[boundary]]\nsurface = "{body}.xmin"\ntype = "displacement"\nux = 0.0\n'
+                            for body in ("plate", "punch"))
+        (folder / "knife.toml").write_text(text)
+    comm.barrier()
+
+
+def knife_runs(comm, folder, variants):
+    """knife.toml run with each list of --set changes in variants: their summaries (all ranks)."""
+    out = []
+    for k, sets in enumerate(variants):
+        run, summary = run_scene(folder / "knife.toml", folder / f"o{k}", sets, comm)
+        run.destroy()
+        assert summary["status"] == "ok"
+        out.append(summary)
+    return out
+
+
+def knife_pair(summary, step=-1):
+    return next(v for key, v in summary["steps"][step]["contact"].items() if key.startswith("contact["))
+
+
+def knife_reaction(summary, step=-1):
+    return summary["steps"][step]["reactions"]["boundary[0] plate.zmin"][2]
+
+
+def test_a_sharp_master_pressed_deep_keeps_its_feature_rows_alone(comm, mpi_tmp):
+    """A shallow knife (faces rising 0.1) as the master of segment master_slave rows, feature_angle = 3, pressed 0.06
+    in 3 steps: its other nodes penetrate the plate, as master_slave lets a master's nodes do. With feature rows
+    on the master the check for nodes that went through out of reach took the master for a side with rows, and
+    the run stopped at step 3 with OUT_OF_REACH after every cutback (hunt30_3 F1). The reaction is nodal
+    two_pass's to 0.2 %."""
+    write_knife(comm, mpi_tmp, "master", "master_slave", "segment", slope=0.1, stroke=0.06, steps=3)
+    feature, nodal = knife_runs(comm, mpi_tmp, [["contact.0.feature_angle=3"],
+                                                ["contact.0.formulation=two_pass", "contact.0.integration=nodal"]])
+    assert knife_pair(feature)["feature_rows"] == 3
+    assert knife_reaction(feature) == pytest.approx(knife_reaction(nodal), rel=2e-3)
+
+
+def test_feature_rows_stay_with_their_nodes(comm, mpi_tmp):
+    """A 20-degree knife, feature_angle = 15, pressed 0.12 in 6 steps with segment master_slave rows: its edge's
+    3 nodes keep their feature rows at every step and the edge is held (penetration under 1e-4; nodal
+    master_slave's reaction to 1e-3). The lean read the current faces, which the edge's own row flattened below 15
+    degrees: the middle node lost its row every other step and sank 0.028, and large sliding's searches did not
+    settle (hunt30_3 F2)."""
+    write_knife(comm, mpi_tmp, "slave", "master_slave", "segment", slope=np.tan(np.radians(20.0)), stroke=0.12,
+                steps=6)
+    feature, nodal = knife_runs(comm, mpi_tmp, [["contact.0.feature_angle=15"], ["contact.0.integration=nodal"]])
+    for step in range(6):
+        pair = knife_pair(feature, step)
+        assert pair["feature_rows"] == 3 and pair["max_penetration_slave"] < 1e-4
+    assert knife_reaction(feature) == pytest.approx(knife_reaction(nodal), rel=1e-3)
+
+
+def test_a_half_knifes_edge_on_its_symmetry_plane_is_a_feature(comm, mpi_tmp):
+    """The half x >= 0.5 of the 45-degree knife and the plate, held at ux = 0 on that plane: the edge's nodes have
+    their faces on one side only, which read no fold at all, and no feature_angle took them (hunt30_3 F3). The
+    faces' mirror images now count: feature_angle = 30 holds the edge, with nodal master_slave's reaction."""
+    write_knife(comm, mpi_tmp, "slave", "master_slave", "segment", half=True)
+    feature, nodal = knife_runs(comm, mpi_tmp, [["contact.0.feature_angle=30"], ["contact.0.integration=nodal"]])
+    assert knife_pair(feature)["feature_rows"] == 3 and knife_pair(feature)["max_penetration_slave"] < 1e-5
+    assert knife_reaction(feature) == pytest.approx(knife_reaction(nodal), rel=1e-4)
+
+
 KNIFE_HELD = 0.51375     # N: the knife's reaction for a 0.002 stroke when its edge's nodal rows hold it
 
 
@@ -197,20 +281,7 @@ def test_a_knife_that_passes_through_its_rows_is_said(comm, mpi_tmp, formulation
     (hunt29_2: master nodes were told nodal master_slave would hold them), feature_angle's included.
     feature_angle below the faces' 45 degrees gives the edge's nodes nodal rows of their own with every
     formulation and rule, on either side: the same reaction as the nodal rows that held it; above it, none."""
-    from qsc_petsc import fem
-    from qsc_petsc.meshgen import box_mesh
-    if comm.rank == 0:
-        write_gmsh_box(mpi_tmp / "plate.msh", None, (5, 5, 1), "hex", (0.0, 0.0, 0.0), (1.0, 1.0, 0.2))
-        box = box_mesh((0.0, 0.0, 0.0), (1.0, 1.0, 1.5), (4, 2, 6), "hex")
-        x = box.points.copy()
-        x[:, 2] += np.abs(x[:, 0] - 0.5) * (1.0 - x[:, 2] / 1.5) + 0.2     # the edge on the plate at x = 0.5
-        write_gmsh(mpi_tmp / "punch.msh", x, box.cells, "hex", {
-            side: fem.cell_faces("hex", box.cells[box.surfaces[side][:, 0]], box.surfaces[side][:, 1])
-            for side in box.surfaces})
-        roles = ("punch.zmin", "plate.zmax") if knife == "slave" else ("plate.zmax", "punch.zmin")
-        (mpi_tmp / "knife.toml").write_text(SKIN_SCENE.format(slave=roles[0], master=roles[1], uz=-0.002,
-                                                              formulation=formulation, integration=integration))
-    comm.barrier()
+    write_knife(comm, mpi_tmp, knife, formulation, integration)
     lines = []
     sets = [f"contact.0.feature_angle={feature_angle}"] if feature_angle else []
     run, summary = run_scene(mpi_tmp / "knife.toml", mpi_tmp / "o", sets, comm, log=lines.append)
