@@ -160,7 +160,14 @@ def symmetry_components(mesh, scene):
 
 def feature_nodes(mesh, S, angle, mirrored=None):
     """A mask over S's owned nodes: those where S folds convexly by more than `angle` (radians) in the reference
-    configuration, the sharp edges and corners that weighted gaps let through (contact[].feature_angle). A node's
+    configuration (ridge_tilts), the sharp edges and corners that weighted gaps let through
+    (contact[].feature_angle). Collective."""
+    return ridge_tilts(mesh, S, mirrored) > angle
+
+
+def ridge_tilts(mesh, S, mirrored=None):
+    """Per owned node of S, how far (radians) S folds convexly there in the reference configuration; 0 where it is
+    flat or folds the other way (a valley). A node's
     faces tilt from its angle-weighted normal m by arccos(|sum w n_f| / sum w) on average (w: the faces' angles at
     the node, n_f their centroid normals): 45 degrees on a box's edge, 54.7 at its corner, a knife's faces' tilt
     from its edge's normal; the fold is convex when the faces' centroids lie behind the node along m, as on a
@@ -182,7 +189,7 @@ def feature_nodes(mesh, S, angle, mirrored=None):
     size = np.linalg.norm(m, axis=1)
     tilt = np.arccos(np.clip(size / np.where(total > 0, total, 1.0), -1.0, 1.0))
     ridge = np.einsum("ki,ki->k", behind, m) < 0.0
-    return (tilt > angle) & ridge & (total > 0)
+    return np.where(ridge & (total > 0), tilt, 0.0)
 
 
 def exchange_faces(mesh, faces, X, U, sizes, need_lo, need_hi):
@@ -429,19 +436,22 @@ def contact_pairs_data(mesh, scene, template):
         M = surface_data(mesh, pair.master, template)
         E = min(scene.bodies[S.body].material.youngs_modulus, scene.bodies[M.body].material.youngs_modulus)
         h_eff = min(touching_sizes(mesh, S, M))
+        if i == 0:
+            mirrored = symmetry_components(mesh, scene)
+        # each side's convex folds (the unforced warning says the deepest sunk node's), and with feature_angle its
+        # feature nodes
+        folds = {"slave": ridge_tilts(mesh, S, mirrored), "master": ridge_tilts(mesh, M, mirrored)}
         features = None
         if pair.feature_angle is not None:
             angle = np.radians(pair.feature_angle)
-            mirrored = symmetry_components(mesh, scene)
-            features = {"slave": feature_nodes(mesh, S, angle, mirrored),
-                        "master": feature_nodes(mesh, M, angle, mirrored),
+            features = {"slave": folds["slave"] > angle, "master": folds["master"] > angle,
                         "sharp": {"slave": np.zeros(len(S.nodes), dtype=bool),
                                   "master": np.zeros(len(M.nodes), dtype=bool)}}
         pairs.append({"index": i, "spec": pair, "slave": S, "master": M, "h_eff": h_eff,
                       "eps_n": pair.penalty * E / h_eff, "radius": pair.search_distance * h_eff,
-                      "features": features,
+                      "features": features, "folds": folds,
                       "memo": {"slave": {}, "master": {}, "master_nodes": {}, "features_slave": {},
-                               "features_master": {}}})     # faces kept (_search_pass)
+                               "features_master": {}, "facing_slave": {}, "facing_master": {}}})     # _search_pass
     return pairs
 
 
@@ -464,6 +474,13 @@ def die_data(mesh, scene, template):
     return dies
 
 
+# feature rows (ContactModel._facing_features): a node of the other surface whose closest point lies this near a
+# feature node's ridge (the shape functions of the face's feature nodes summing to at least this) takes a nodal
+# row beside its own. Put in place of its own, a shallow knife's plate nodes pressed deep lost their segment
+# rows, and the force fell from nodal two_pass's to 4 % under it
+FACING_RIDGE = 0.5
+# the unforced warning calls a sunk node's surface flat below this fold (degrees; ridge_tilts)
+FLAT_FOLD = 1.0
 # a pair's or die's gaps are differences of coordinates, known to eps |x|: far from the origin they are round-off
 # below that, and a penalty's penetrations (~1e-7 h at alpha 1e4) are lost in it. Said (precision_warnings) when
 # eps |x| passes this share of the pair's h_eff: the two cubes moved 1e6 m (eps |x| 3.4e-9 h) kept their answer,
@@ -716,14 +733,16 @@ class ContactModel:
                                                                      move=self._to_row_owners)
                 else:
                     rows = row_builders.quasi_symmetric(sp, mp, weight)
-            feature_ids = ()
+            feature_rows = 0
             if pd["features"] is not None:
                 with self._phase("search"):
-                    passes, feature_ids = self._feature_passes(pd, X, U)
-                rows = row_builders.with_nodal_rows(rows, passes, feature_ids)
+                    passes, feature_ids, extra = self._feature_passes(pd, X, U)
+                rows = row_builders.with_nodal_rows(rows, passes, feature_ids, extra)
+                feature_rows = len(feature_ids) + self.comm.allreduce(
+                    sum(len(np.unique(pss.node)) for pss in extra), op=MPI.SUM)
             term = self._term(name, rows, pd["eps_n"], pd["h_eff"], spec.enforcement == "augmented_lagrangian",
                               alpha=spec.penalty)
-            term.feature_rows = len(feature_ids)
+            term.feature_rows = feature_rows
             term.points = points
             term.augmented_tolerance = spec.augmented_tolerance
             # the pressure of a strain of FLOOR_STRAIN: E_eff FLOOR_STRAIN, E_eff = eps_n h_eff / alpha
@@ -742,12 +761,15 @@ class ContactModel:
         return term
 
     def _feature_passes(self, pd, X, U):
-        """The feature nodes' (feature_nodes) nodal passes against the other surface, and the global row ids of
-        those that found a face (every rank's): their rows are to be these (rows.with_nodal_rows). Collective."""
-        passes, ids = [], []
+        """The nodal passes against the other surface of the feature nodes (feature_nodes), the global row ids of
+        those that found a face (every rank's), whose rows are to be these, and the nodal passes of the nodes that
+        face one (_facing_features), whose rows are added (rows.with_nodal_rows). Collective."""
+        passes, ids, sharp, extra = [], [], {}, []
         lean = np.cos(np.radians(pd["spec"].feature_angle))
-        for side, S, T in (("slave", pd["slave"], pd["master"]), ("master", pd["master"], pd["slave"])):
+        sides = (("slave", pd["slave"], pd["master"]), ("master", pd["master"], pd["slave"]))
+        for side, S, T in sides:
             which = pd["features"][side]
+            sharp[side] = np.zeros(len(S.nodes), dtype=bool)
             if not self.comm.allreduce(bool(which.any()), op=MPI.LOR):
                 continue
             fp, ok, found = project_pass(self.mesh, S, T, X, U, pd["radius"], pd["memo"][f"features_{side}"],
@@ -757,11 +779,38 @@ class ContactModel:
             # threshold, rows that came and went made large sliding's searches cycle (hunt30_3)
             held = pd["features"]["sharp"][side]
             held[which] |= ok & (facing_lean(self.mesh, S, X, U, which, found) < lean)
-            sharp = S.nodes[which][ok & held[which]]
-            passes.append(fp.subset(np.isin(fp.node, self.mesh.gvert[sharp])))
-            ids.append(3 * self.mesh.gvert[sharp])
+            sharp[side][which] = ok & held[which]
+            passes.append(fp.subset(np.isin(fp.node, self.mesh.gvert[S.nodes[sharp[side]]])))
+            ids.append(3 * self.mesh.gvert[S.nodes[sharp[side]]])
+        for (side, S, T), (other, _, _) in zip(sides, sides[::-1]):
+            facing = self._facing_features(pd, side, S, T, sharp[other], sharp[side], X, U)
+            if facing is not None:
+                extra.append(facing)
         ids = np.concatenate(ids) if ids else np.zeros(0, dtype=np.int64)
-        return passes, np.concatenate(self.comm.allgather(ids)).astype(np.int64)
+        return passes, np.concatenate(self.comm.allgather(ids)).astype(np.int64), extra
+
+    def _facing_features(self, pd, side, S, T, T_sharp, S_sharp, X, U):
+        """The nodal pass of S's nodes (not feature nodes themselves) whose closest point on T lies near a feature
+        node of T (T_sharp, a mask over T's owned nodes; FACING_RIDGE), or None when T has none: a row beside
+        their own. A flat surface's weighted rows let a knife's edge in as the edge's own let it through, and
+        master_slave holds no master node: the plate's nodes between the edge's, or on a half model's plane under
+        it, went 40 % of the stroke into the edge, the force 21-24 % low against nodal two_pass rows and a refined
+        edge (hunt30_5). Collective."""
+        mesh = self.mesh
+        gids = np.concatenate(self.comm.allgather(mesh.gvert[T.nodes[T_sharp]]))
+        if not len(gids):
+            return None
+        at = np.concatenate(self.comm.allgather((X + U)[T.nodes[T_sharp]]))
+        reach = pd["radius"] + self.comm.allreduce(float(T.size[T_sharp].max(initial=0.0)), op=MPI.MAX)
+        near = np.zeros(len(S.nodes), dtype=bool)
+        points = candidate_pairs((X + U)[S.nodes], at, at, reach)[0]
+        near[points] = True
+        near &= ~S_sharp
+        fp, _, _ = project_pass(mesh, S, T, X, U, pd["radius"], pd["memo"][f"facing_{side}"], near)
+        # on the ridge's half of the face: its feature nodes' shape functions sum to at least FACING_RIDGE there
+        keep = (fp.shape * np.isin(fp.target_nodes, gids)).sum(axis=1) >= FACING_RIDGE
+        nodes = np.unique(fp.node[keep])
+        return fp.subset(np.isin(fp.node, nodes))
 
     def settle(self, u):
         """Large sliding, after a converged solve at the current load factor: each large-sliding pair searched
@@ -860,7 +909,7 @@ class ContactModel:
                      "rows_searched_for": self.searches[term.name]["load_factor"],
                      "rows_kept": self.searches[term.name]["kept"], "searches": self.searches[term.name]["count"],
                      "gap_change": _finite_or_none(self.searches[term.name]["gap_change"])}
-            mean_pen, pressed_unfaced, unfaced_force, step_slip, depth = {}, 0, {}, 0.0, {}
+            mean_pen, pressed_unfaced, unfaced_force, step_slip, depth, fold = {}, 0, {}, 0.0, {}, {}
             for side, S, T in (("slave", pd["slave"], pd["master"]), ("master", pd["master"], pd["slave"])):
                 _, ok, found = project_pass(mesh, S, T, X, U, pd["radius"], weighted=False)
                 area, normal = self._pressed_areas(S, X, U, found, F[_owned_rows(mesh, S.nodes)])
@@ -888,6 +937,9 @@ class ContactModel:
                 for with_force in (True, False):     # the deepest nodes with and without contact force
                     depth[side, with_force] = self.comm.allreduce(float(h[presses[ok] == with_force].max(initial=0.0)),
                                                                   op=MPI.MAX)
+                # the fold of the deepest node without force (the warning's advice): the largest of those as deep
+                unforced = np.flatnonzero(~presses[ok] & (h >= depth[side, False]) & (h > 0))
+                fold[side] = self.comm.allreduce(float(pd["folds"][side][ok][unforced].max(initial=0.0)), op=MPI.MAX)
                 unfaced_force[side] = self.comm.allreduce(float((p_own * area)[unfaced].sum()), op=MPI.SUM)
                 force = self.comm.allreduce(-F[_owned_rows(mesh, S.nodes)].sum(axis=0), op=MPI.SUM)
                 entry[f"max_penetration_{side}"] = _finite_or_none(
@@ -912,7 +964,8 @@ class ContactModel:
             bound = max(UNFORCED_WARNING * pd["h_eff"], UNFORCED_RATIO * max(depth["slave", True], depth["master", True]))
             for side in ("slave", "master"):
                 entry[f"max_penetration_unforced_{side}"] = depth[side, False]
-            self.unforced[pd["index"]] = [side for side in ("slave", "master") if depth[side, False] > bound]
+            self.unforced[pd["index"]] = {side: np.degrees(fold[side]) for side in ("slave", "master")
+                                          if depth[side, False] > bound}
             # the share of the slave's normal force those nodes carry (on the side where it is larger)
             entry["pressed_unfaced_share"] = max(unfaced_force.values()) / max(entry["total_normal_force"], 1e-300)
             summaries[f"contact[{pd['index']}] {pd['spec'].slave} / {pd['spec'].master}"] = entry
@@ -959,6 +1012,24 @@ class ContactModel:
         toward["normal"][pushed] = -F[pushed] / size[pushed, None]
         return facing_areas(self.mesh, S, X, U, slice(None), toward)
 
+    @staticmethod
+    def _feature_advice(pd, fold):
+        """What feature_angle can do for sunk nodes whose surface folds `fold` degrees there (ridge_tilts)."""
+        angle, key = pd["spec"].feature_angle, f"contact[{pd['index']}].feature_angle"
+        if fold < FLAT_FOLD:
+            # a knife's edge pressing into a plate: the plate's nodes (hunt30_5 A)
+            return ("; they lie where their surface is flat, which no feature_angle takes in: a sharp edge or corner "
+                    "of the other surface presses into them" + (
+                        f", and {key} below its fold gives its nodes, and the nodes they press, nodal rows of "
+                        f"their own" if angle is None else ""))
+        if angle is None:
+            return (f"; or set {key} below {fold:.0f} degrees (their fold), which gives such nodes nodal rows of their "
+                    f"own with any formulation and rule")
+        if angle >= fold:
+            return f"; feature_angle = {angle:g} is above their fold ({fold:.0f} degrees): lower it below that"
+        return (f"; feature_angle = {angle:g} took in their fold ({fold:.0f} degrees), but their faces lean from the "
+                f"other surface by less than that where they meet it")
+
     def slip_warnings(self, summaries):
         """Lines on the pairs' state after a step (report's summaries): a small-sliding pair whose contact slid
         farther than SLIP_WARNING x h_eff (max_slip_*), a pair whose pressed nodes face nothing of the other
@@ -990,15 +1061,10 @@ class ContactModel:
             if sunk and (name, "unforced") not in self.slip_warned:
                 self.slip_warned.add((name, "unforced"))
                 depth = max(entry[f"max_penetration_unforced_{side}"] for side in sunk)
-                cure = ("nodal rows of master_slave or two_pass hold it" if sunk == ["slave"] else
+                cure = ("nodal rows of master_slave or two_pass hold it" if list(sunk) == ["slave"] else
                         "master_slave never holds the master's nodes: make the sharp (or finer) surface the slave with "
                         "nodal rows of master_slave, or use two_pass with nodal rows")
-                angle = spec.feature_angle
-                cure += (f"; or set contact[{pd['index']}].feature_angle (degrees) below the tilt of the edge's "
-                         f"faces, which gives such nodes nodal rows of their own with any formulation and rule"
-                         if angle is None else
-                         f"; feature_angle = {angle:g} gave nodal rows to the ridges whose faces tilt more than "
-                         f"that from the other surface: lower it to take in these")
+                cure += self._feature_advice(pd, max(sunk.values()))
                 lines.append(
                     f"{name}: {' and '.join(sunk)} nodes with no contact force penetrate the other surface by up to "
                     f"{depth:.3g} m = {depth / pd['h_eff']:.2g} h_eff: no row holds them. A sharp edge or corner (or a "

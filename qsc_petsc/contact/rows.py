@@ -219,10 +219,14 @@ def two_pass(slave_pass, master_pass):
     return _rows([pass_rows(slave_pass, 1.0), pass_rows(master_pass, 1.0)], 0.5)
 
 
-def with_nodal_rows(rows, passes, ids):
+def with_nodal_rows(rows, passes, ids, extra=()):
     """rows with the rows of global ids `ids` (every rank's) taken out and the nodal rows of the passes (nodal
     projections of those nodes, pass_rows) put in their place, at rows' phi: a feature node's own row against
-    the other surface instead of its weighted one (contact[].feature_angle)."""
+    the other surface instead of its weighted one (contact[].feature_angle); the nodal rows of the passes
+    `extra` are added beside their nodes' own, on row 3 k + 1 (a node's second slot)."""
+    for pss in extra:
+        G_r, G_c, G_v, g_r, g_v, W_r, W_v = pass_rows(pss, 1.0)
+        rows = Rows.concat(rows, _rows([(G_r + 1, G_c, G_v, g_r + 1, g_v, W_r + 1, W_v)], rows.phi))
     if not len(ids):
         return rows
     out = Rows(*(x[~np.isin(rows_of, ids)] for x, rows_of in (
