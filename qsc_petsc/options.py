@@ -1,5 +1,6 @@
 """PETSc start-up and the options database: scene [petsc] tables under the qsc_ prefix, command line first."""
 
+import os
 import re
 import sys
 
@@ -168,6 +169,26 @@ def check_options():
         if not number >= 0 or (not integer and number == float("inf")):
             raise SceneError(f"-{name}: must be {'an integer' if integer else 'a finite number'} >= 0, "
                              f"got {value!r}")
+        if name.endswith("ksp_rtol") and number >= 1:
+            # every linear solve then stops before its first iteration: zero Newton steps, which the step test
+            # took for a converged solve (the two cubes never moved, exit 0; hunt30_6)
+            raise SceneError(f"-{name}: must be below 1 (at {value} every linear solve stops before its first "
+                             f"iteration), got {value!r}")
+    for name, value in options_in_effect().items():
+        path = _viewer_file(value) if name.startswith(PREFIX) else None
+        if path is not None and not os.access(os.path.dirname(os.path.abspath(path)), os.W_OK):
+            # rank 0 alone opens an ASCII viewer's file: its failure there left the other ranks waiting (exit 1
+            # after 40 s on 2 ranks; hunt30_6)
+            raise SceneError(f"PETSc options: {_OPTION_ERRORS[65]} in -{name} ({path!r}: its folder does not "
+                             f"exist or is not writable)")
+
+
+def _viewer_file(value):
+    """The file a viewer option's value names (type:file[:format][:append]), or None."""
+    parts = (value or "").split(":")
+    if len(parts) >= 2 and parts[0] in ("ascii", "binary", "hdf5", "vtk", "draw", "socket") and parts[1]:
+        return parts[1] if parts[0] in ("ascii", "binary", "hdf5", "vtk") else None
+    return None
 
 
 # PETSc error codes that setFromOptions raises for a bad option: wrong argument, out of range (a value
@@ -176,7 +197,8 @@ def check_options():
 _OPTION_ERRORS = {56: "a value the option does not support (a viewer option such as -qsc_ksp_monitor takes no "
                       "value, or ascii:FILE)", 62: "a wrong argument", 63: "a value out of range or not a number",
                   65: "a file that cannot be opened", 83: "a value that is none of the option's choices",
-                  86: "an unknown type"}
+                  86: "an unknown type", 92: "a factorization that no installed package provides for this matrix "
+                                             "(-qsc_pc_factor_mat_solver_type, -qsc_band_pc_factor_mat_solver_type)"}
 
 
 def set_from_options(obj, what):
@@ -208,7 +230,7 @@ def _holders(detail):
     quoted = (re.search(r"Input string (\S+) has no numeric value", detail)
               or re.search(r"Unsupported viewer (\S+)", detail) or re.search(r"file: (\S+)", detail))
     names = [f"-{name}" for name, value in options_in_effect().items()
-             if quoted and (value == quoted.group(1) or value.endswith(":" + quoted.group(1)))]
+             if quoted and value and (value == quoted.group(1) or value.endswith(":" + quoted.group(1)))]
     if "Unable to find requested" in detail:        # a type option given no value: PETSc quotes an empty name
         names = [f"-{name} (no value given)" for name, value in options_in_effect().items()
                  if name.startswith(PREFIX) and name.endswith("_type") and not value]

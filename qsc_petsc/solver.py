@@ -377,6 +377,7 @@ class System:
         # round-off floor (None: it met the target)
         self.last_fnorm = None
         self.floor = None
+        self.linear_short = False      # the last solve stopped on a linear solve that ended far above the target
         self.own_options = set()       # options this system set (removed by destroy)
         # the rows' stiffnesses d the Jacobian holds: between two searches J = K + sum G^T diag(d) G depends
         # on u through d only, so an unchanged d keeps J, and the preconditioner built on it, as they are
@@ -697,7 +698,7 @@ class System:
             self._tie_gates()
         last_fnorm, self.last_fnorm = self.last_fnorm, fnorm
         if it == 0:
-            self.floor = None
+            self.floor, self.linear_short = None, False
             return PETSc.SNES.ConvergedReason.CONVERGED_FNORM_ABS if fnorm <= atol else 0
         if not np.isfinite(fnorm):
             return PETSc.SNES.ConvergedReason.DIVERGED_FNORM_NAN
@@ -713,6 +714,11 @@ class System:
             if fnorm <= rtol * self.force_scale:
                 return PETSc.SNES.ConvergedReason.CONVERGED_FNORM_RELATIVE
             if ynorm <= stol * xnorm:
+                if not self._krylov_reached(rtol * self.force_scale):
+                    # the linear solve stopped before its first iteration, far above the target (a -qsc_ksp_atol
+                    # above the residual): its zero step is no round-off floor (reactions 9 % off, exit 0; hunt30_6)
+                    self.linear_short = True
+                    return PETSc.SNES.ConvergedReason.DIVERGED_LINEAR_SOLVE
                 self.floor = fnorm / self.force_scale
                 return PETSc.SNES.ConvergedReason.CONVERGED_SNORM_RELATIVE
             before = self.fnorms[-3] if len(self.fnorms) >= 3 else None
@@ -722,6 +728,22 @@ class System:
         if it >= max_it:
             return PETSc.SNES.ConvergedReason.DIVERGED_MAX_IT
         return 0
+
+    def _krylov_reached(self, target):
+        """Whether the last linear solve's step may be taken for the answer's last correction: a direct solve's,
+        one that iterated (at a round-off floor its iterations stop on the rows' round-off, far above the target:
+        the sliding cubes at alpha 1e8-1e10, hunt29_3), or one whose residual was already within FLOOR_SPAN of the
+        target. A solve that stopped before its first iteration above that made no step at all (a -qsc_ksp_atol
+        above the residual)."""
+        ksp = self.snes.getKSP()
+        if ksp.getType() == PETSc.KSP.Type.PREONLY or ksp.getIterationNumber() > 0:
+            return True
+        try:
+            if ksp.getNormType() != PETSc.KSP.NormType.UNPRECONDITIONED:
+                return True
+        except PETSc.Error:
+            return True
+        return ksp.getResidualNorm() <= FLOOR_SPAN * target
 
     def _on_floor(self, it, fnorm, last_fnorm, target, before=None):
         """Whether the residual sits on the linear solves' round-off floor: the last step was taken with the
@@ -878,6 +900,7 @@ class System:
             "tied_rows": self.tied_rows,       # sticking die rows kept closed after cycling (_tie_gates)
             "tied_in_tension": self._tied_in_tension(),   # of those, the ones the answer pulls on
             "round_off_floor": self.floor,     # the relative residual it stopped at on the floor, or None
+            "linear_short": self.linear_short,
             "jacobian_assemblies": self.jacobian_rebuilds - rebuilds,   # with rows: one per new active set
         }
         if reason > 0:
@@ -956,8 +979,11 @@ class System:
         snes, ksp = self.snes, self.snes.getKSP()
         rtol, atol, stol, max_it = snes.getTolerances()
         krtol, katol, _, kmax = ksp.getTolerances()
-        norm = {v: k for k, v in vars(PETSc.KSP.NormType).items() if not k.startswith("_")}[ksp.getNormType()]
-        side = {0: "left", 1: "right", 2: "symmetric"}[ksp.getPCSide()]
+        try:
+            norm = {v: k for k, v in vars(PETSc.KSP.NormType).items() if not k.startswith("_")}[ksp.getNormType()]
+            side = {0: "left", 1: "right", 2: "symmetric"}[ksp.getPCSide()]
+        except PETSc.Error:        # a norm or side the KSP type does not support (its solve failed on it already)
+            norm, side = "unsupported", "unsupported"
         lines = [f"# snes: {snes.getType()}, rtol {rtol:g}, atol {atol:g}, stol {stol:g}, max_it {max_it}",
                  (f"# ksp: {ksp.getType()}, {side} preconditioning, {norm.lower()} norm, rtol {krtol:g}, "
                   f"atol {katol:g}, max_it {kmax}")]
@@ -1033,7 +1059,7 @@ def _merge(stats, more):
     if stats["damped_from"] is None:        # the Newton iteration of the first solve that met cycling
         stats["damped_from"] = more["damped_from"]
     stats.update({k: more[k] for k in ("snes_reason", "ksp_reason", "active_rows", "tied_in_tension",
-                                       "round_off_floor")})
+                                       "round_off_floor", "linear_short")})
     if "multipliers_unsettled" in more:     # the outcome's: why a later solve of the try failed
         stats["multipliers_unsettled"] = more["multipliers_unsettled"]
     stats["multipliers_at_round_off"] = more.get("multipliers_at_round_off")     # the answer's multipliers'
@@ -1150,6 +1176,10 @@ def solve_load_step(system, step, t_prev, t_target, u, update_terms, max_cutback
             free = stats.get("free_motion", "")
             why = (f"; an iterate left {free} held by no boundary and no closed contact row (a body held only "
                    f"by contact that separates has no equilibrium)") if free else ""
+            if stats.get("linear_short"):
+                why = ("; a linear solve stopped with its residual far above the Newton target and its step no "
+                       "correction (-qsc_ksp_atol above the residual, or -qsc_ksp_rtol near 1): lower them, or "
+                       "leave them to qsc, which sets the Krylov stop below the Newton target")
             if stats["snes_reason"] == "AUGMENTED_LAGRANGIAN_MAX_IT":
                 name, change, tol = stats["multipliers_unsettled"]
                 why = (f"; the multipliers of {name} still changed by {change:.2g} (relative; its "

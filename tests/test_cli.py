@@ -684,6 +684,39 @@ def test_a_viewer_option_with_a_bad_value_is_an_input_error(tmp_path, option, ho
     assert proc.returncode == 0 and "Linear qsc_ solve converged due to" in proc.stdout, proc.stdout + proc.stderr
 
 
+@pytest.mark.parametrize("case", ["rtol 1", "atol above", "minres", "no cholesky", "value-less", "viewer file"])
+def test_solver_options_that_cannot_work_end_cleanly(tmp_path, case):
+    """Options a PETSc user may try, each of which ended in a wrong answer with exit 0 or a traceback with exit 1
+    (hunt30_6): -qsc_ksp_rtol 1 stops every linear solve before its first iteration, and the zero Newton steps
+    passed the step test (the two cubes never moved, exit 0): exit 2 naming it; a -qsc_ksp_atol above the residual
+    likewise (reactions 9 % off): exit 3 saying why; minres, which cannot take the unpreconditioned norm, failed
+    again writing petsc_options.txt (exit 1): exit 3 with the file written; a Cholesky no package provides, met
+    at set-up (exit 1, no summary): exit 2; a refused value beside a value-less option crashed naming it (exit
+    1); an ASCII viewer's file that cannot be written, which rank 0 alone opens, left the others waiting: exit 2
+    before the run."""
+    options, code, said = {
+        "rtol 1": (["-qsc_ksp_rtol", "1"], 2, "-qsc_ksp_rtol: must be below 1"),
+        "atol above": (["-qsc_ksp_type", "cg", "-qsc_ksp_atol", "1"], 3,
+                       "a linear solve stopped with its residual far above the Newton target"),
+        "minres": (["-qsc_ksp_type", "minres"], 3, "KSP minres does not support norm type"),
+        "no cholesky": (["-qsc_pc_type", "cholesky", "-qsc_pc_factor_mat_solver_type", "superlu"], 2,
+                        "a factorization that no installed package provides"),
+        "value-less": (["-qsc_snes_monitor", "-qsc_ksp_monitor", "true"], 2,
+                       "a value the option does not support (a viewer option such as -qsc_ksp_monitor takes no value, "
+                       + "or ascii:FILE) in -qsc_ksp_monitor ("),
+        "viewer file": (["-qsc_snes_converged_reason", "ascii:/nonexistent/f.txt"], 2,
+                        "a file that cannot be opened in -qsc_snes_converged_reason ('/nonexistent/f.txt'"),
+    }[case]
+    proc = subprocess.run([sys.executable, "-m", "qsc_petsc.cli", "run", str(CONFIGS / "block_compression.toml"),
+                           "--out", str(tmp_path), *options], capture_output=True, text=True, timeout=120,
+                          check=False)
+    assert proc.returncode == code, proc.stdout + proc.stderr
+    assert said in proc.stdout.splitlines()[-1], proc.stdout
+    assert "Traceback" not in proc.stderr + proc.stdout
+    assert json.loads((tmp_path / "summary.json").read_text())["status"] == "failed"
+    assert (tmp_path / "petsc_options.txt").exists()
+
+
 BAND_OPTIONS = {
     "unknown type": (["-qsc_band_pc_type", "nonexistent"],
                      "qsc: error: PETSc options of the contact band's solve (-qsc_band_*): an unknown type",

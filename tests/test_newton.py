@@ -304,7 +304,8 @@ def test_a_try_reports_the_failure_of_its_last_solve():
     from qsc_petsc.solver import _merge
     first = {"snes_iterations": 3, "ksp_iterations": 3, "jacobian_assemblies": 2, "damped_steps": 0,
              "tied_rows": 0, "damped_from": None, "snes_reason": "CONVERGED_FNORM_RELATIVE",
-             "ksp_reason": "CONVERGED_ITS", "active_rows": 10, "tied_in_tension": 0, "round_off_floor": 3e-2}
+             "ksp_reason": "CONVERGED_ITS", "active_rows": 10, "tied_in_tension": 0, "round_off_floor": 3e-2,
+             "linear_short": False}
     later = dict(first, snes_iterations=5, damped_from=4, tied_rows=2, snes_reason="AUGMENTED_LAGRANGIAN_MAX_IT",
                  multipliers_unsettled=("contact[1]", 1.6e-5, 1e-6), round_off_floor=None)
     _merge(first, later)
