@@ -121,11 +121,15 @@ def options_in_effect():
 
 
 def options_text(options, from_scene, settings=()):
-    """petsc_options.txt: the options database (source: scene [petsc] table, command line or program default),
+    """petsc_options.txt: the options database (source: scene [petsc] table, command line, environment or program
+    default),
     then `settings`, lines naming what the solver objects hold that no option in the database says."""
-    lines = ["# PETSc options in the database (source: scene [petsc] table, command line or program default)"]
+    header = ("# PETSc options in the database (source: scene [petsc] table, command line, environment (PETSC_OPTIONS "
+              "or a .petscrc) or program default)")
+    lines = [header]
     for name, value in options.items():
-        source = "scene" if name in from_scene else "command line" if name in _AT_START_UP else "program default"
+        source = ("scene" if name in from_scene else "command line" if name in _COMMAND_LINE else
+                  "environment" if name in _AT_START_UP else "program default")
         lines.append(f"-{name}" + (f" {value}" if value not in (None, "") else "") + f"    # {source}")
     if settings:
         lines += ["# the solver objects at the end of the run (what qsc set through the API, and PETSc's defaults)",

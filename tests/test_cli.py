@@ -661,6 +661,8 @@ def test_an_unprefixed_option_from_the_environment_is_left_alone(tmp_path):
     proc = subprocess.run([sys.executable, "-m", "qsc_petsc.cli", "run", str(CONFIGS / "block_compression.toml"),
                            "--out", str(tmp_path)], capture_output=True, text=True, timeout=120, check=False, env=env)
     assert proc.returncode == 0, proc.stdout + proc.stderr
+    # petsc_options.txt says where it came from (it read "command line"; hunt30_6)
+    assert "-ksp_converged_reason    # environment" in (tmp_path / "petsc_options.txt").read_text()
 
 
 @pytest.mark.parametrize("option, holder", [
