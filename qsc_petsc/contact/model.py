@@ -428,7 +428,7 @@ def touching_sizes(mesh, S, M):
             for i, surface in enumerate((S, M))]
 
 
-def contact_pairs_data(mesh, scene, template):
+def contact_pairs_data(mesh, scene, template, mirrored=None):
     """Surfaces, penalty scale and search radius of every contact pair."""
     pairs = []
     for i, pair in enumerate(scene.contact):
@@ -436,7 +436,7 @@ def contact_pairs_data(mesh, scene, template):
         M = surface_data(mesh, pair.master, template)
         E = min(scene.bodies[S.body].material.youngs_modulus, scene.bodies[M.body].material.youngs_modulus)
         h_eff = min(touching_sizes(mesh, S, M))
-        if i == 0:
+        if mirrored is None:
             mirrored = symmetry_components(mesh, scene)
         # each side's convex folds (the unforced warning says the deepest sunk node's), and with feature_angle its
         # feature nodes
@@ -515,7 +515,9 @@ class ContactModel:
         self.mesh, self.scene, self.comm = mesh, scene, mesh.comm
         self.template = template
         self.phases = phases
-        self.pairs = contact_pairs_data(mesh, scene, template)
+        # the components normal to the symmetry planes each vertex lies on (the folds' and tractions' mirror images)
+        self.mirrored = symmetry_components(mesh, scene) if scene.contact else None
+        self.pairs = contact_pairs_data(mesh, scene, template, self.mirrored)
         self.dies = die_data(mesh, scene, template)
         self.current = []
         self.faced_at_start = {}   # (pair, side): the opposite material point each node faced at u = 0 (report)
@@ -1010,7 +1012,15 @@ class ContactModel:
         pushed = (found["face"] < 0) & (size > 0)
         toward = {"face": np.where(pushed, 0, found["face"]), "normal": found["normal"].copy()}
         toward["normal"][pushed] = -F[pushed] / size[pushed, None]
-        return facing_areas(self.mesh, S, X, U, slice(None), toward)
+        area, normal = facing_areas(self.mesh, S, X, U, slice(None), toward)
+        # on a symmetry plane the faces' mirror images count: the normal loses its component across the plane (a
+        # half knife's total normal force read 0.149 against its force 0.210 N; hunt30_5 D)
+        mirrored = self.mirrored[S.nodes]
+        if mirrored.any():
+            flat = np.where(mirrored, 0.0, normal)
+            length = np.linalg.norm(flat, axis=1)
+            normal = np.where(length[:, None] > 0, flat / np.where(length > 0, length, 1.0)[:, None], normal)
+        return area, normal
 
     @staticmethod
     def _feature_advice(pd, fold):
