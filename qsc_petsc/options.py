@@ -173,25 +173,30 @@ def check_options():
         if not number >= 0 or (not integer and number == float("inf")):
             raise SceneError(f"-{name}: must be {'an integer' if integer else 'a finite number'} >= 0, "
                              f"got {value!r}")
-        if name.endswith("ksp_rtol") and number >= 1:
+        if name == f"{PREFIX}ksp_rtol" and number >= 1:      # the Newton solve's (the band's is a direct solve)
             # every linear solve then stops before its first iteration: zero Newton steps, which the step test
             # took for a converged solve (the two cubes never moved, exit 0; hunt30_6)
             raise SceneError(f"-{name}: must be below 1 (at {value} every linear solve stops before its first "
                              f"iteration), got {value!r}")
     for name, value in options_in_effect().items():
-        path = _viewer_file(value) if name.startswith(PREFIX) else None
-        if path is not None and not os.access(os.path.dirname(os.path.abspath(path)), os.W_OK):
+        path = _viewer_file(value) if name.startswith(PREFIX) or name == "log_view" else None
+        if path is None:
+            continue
+        folder = os.path.dirname(os.path.abspath(path))
+        why = ("a folder is there" if os.path.isdir(path) else
+               None if os.path.isdir(folder) and os.access(folder, os.W_OK) else
+               "its folder does not exist or is not writable")
+        if why:
             # rank 0 alone opens an ASCII viewer's file: its failure there left the other ranks waiting (exit 1
-            # after 40 s on 2 ranks; hunt30_6)
-            raise SceneError(f"PETSc options: {_OPTION_ERRORS[65]} in -{name} ({path!r}: its folder does not "
-                             f"exist or is not writable)")
+            # after 40 s on 2 ranks; hunt30_6, hunt30_7: ":FILE", a folder as FILE, -log_view at the end)
+            raise SceneError(f"PETSc options: {_OPTION_ERRORS[65]} in -{name} ({path!r}: {why})")
 
 
 def _viewer_file(value):
-    """The file a viewer option's value names (type:file[:format][:append]), or None."""
+    """The file a viewer option's value names (type:file[:format][:append]; no type: ascii), or None."""
     parts = (value or "").split(":")
-    if len(parts) >= 2 and parts[0] in ("ascii", "binary", "hdf5", "vtk", "draw", "socket") and parts[1]:
-        return parts[1] if parts[0] in ("ascii", "binary", "hdf5", "vtk") else None
+    if len(parts) >= 2 and parts[0] in ("", "ascii", "binary", "hdf5", "vtk") and parts[1]:
+        return parts[1]
     return None
 
 

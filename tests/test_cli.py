@@ -355,17 +355,23 @@ def test_dash_h_is_the_help():
 def test_check_and_run_say_a_scene_too_far_from_the_origin(tmp_path):
     """The two cubes moved 1e9 m (their elements 0.11-0.17 m): coordinates known to 2.2e-7 m, 2e-6 of an element,
     where a penalty's penetrations (~1e-7 of it) are round-off; far enough and the answer went 97 % off, exit 0 with
-    no word (hunt30_4). check and run say it in one line naming the pair and the dies; at 1e6 m nothing."""
+    no word (hunt30_4). check and run say it in one line naming the pair and the dies; at 1e6 m nothing, nor for
+    a scene near the origin with a body or a die's point far off (hunt30_7)."""
+    cells = ["--set", "bodies.0.mesh.cells=[2,2,2]", "--set", "bodies.1.mesh.cells=[3,3,3]"]
+    code, out = qsc(["check", CONFIGS / "two_cubes_dies.toml", *cells, "--set", "die.0.point=[1e9,-3e9,0]"],
+                    cwd=tmp_path)
+    assert code == 0 and "far from the origin" not in out, out      # the die's plane is z = 0 all the same
     for offset, warned in ((1e9, True), (1e6, False)):
         moved = ["--set", f"bodies.0.mesh.origin=[{offset},0,0]", "--set", f"bodies.1.mesh.origin=[{offset},0,1]",
-                 "--set", "bodies.0.mesh.cells=[2,2,2]", "--set", "bodies.1.mesh.cells=[3,3,3]"]
+                 *cells]
         for command in (["check"], ["run", "--out", tmp_path / f"o{offset:g}"]):
             code, out = qsc([command[0], CONFIGS / "two_cubes_dies.toml", *command[1:], *moved], cwd=tmp_path)
             assert code == 0, out
-            said = [line for line in own_lines(out) if "from the origin, where coordinates are known to" in line]
+            said = [line for line in own_lines(out) if "far from the origin: " in line]
             assert len(said) == warned, out
             if warned:
-                assert "contact[0] (0.333 m: 6.7e-07), die[0] (0.5 m: 4.4e-07), die[1] (0.333 m: 6.7e-07)" in said[0]
+                assert ("contact[0] (1e+09 m out, known to 2.2e-07 m, 6.7e-07 of its element size 0.333 m), die[0] "
+                        "(1e+09 m out, known to 2.2e-07 m, 4.4e-07 of its element size 0.5 m), die[1]") in said[0]
 
 
 @pytest.mark.parametrize("ranks", RANKS)

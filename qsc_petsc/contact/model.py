@@ -538,20 +538,29 @@ class ContactModel:
 
     def precision_warnings(self):
         """A line (in a list; none if all is well) naming the pairs and dies whose element size is within
-        1 / COORDINATE_PRECISION of the coordinates' precision, eps |x| (x: the mesh's node farthest from the
-        origin, or a die's point) (collective)."""
-        far = self.comm.allreduce(float(np.abs(self.mesh.coords).max(initial=0.0)), op=MPI.MAX)
-        far = max([far] + [float(np.abs(dd["spec"].point).max()) for dd in self.dies])
-        precision = np.finfo(float).eps * far
-        sizes = [(f"contact[{pd['index']}]", pd["h_eff"]) for pd in self.pairs] + [
-            (f"die[{dd['index']}]", dd["h"]) for dd in self.dies]
-        near = [f"{name} ({h:.3g} m: {precision / h:.2g})" for name, h in sizes if precision > COORDINATE_PRECISION * h]
+        1 / COORDINATE_PRECISION of their coordinates' precision, eps |x| (x: the farthest node of the pair's
+        surfaces, or of the die's with its plane's offset) (collective). A body or a die's point far from a
+        contact that lies near the origin raised it at first (hunt30_7)."""
+        X = self.mesh.coords
+
+        def farthest(nodes):
+            return self.comm.allreduce(float(np.abs(X[nodes]).max(initial=0.0)), op=MPI.MAX)
+
+        entries = [(f"contact[{pd['index']}]", pd["h_eff"], max(farthest(pd["slave"].nodes), farthest(pd["master"].nodes)))
+                   for pd in self.pairs]
+        for dd in self.dies:
+            n = np.asarray(dd["spec"].normal, dtype=float) / np.linalg.norm(dd["spec"].normal)
+            offset = float(np.abs(np.asarray(dd["spec"].point, dtype=float) * n).max())   # the gaps' (x - p) . n
+            entries.append((f"die[{dd['index']}]", dd["h"], max(farthest(dd["nodes"]), offset)))
+        eps = np.finfo(float).eps
+        near = [(name, h, reach) for name, h, reach in entries if eps * reach > COORDINATE_PRECISION * h]
         if not near:
             return []
-        line = (f"the scene reaches {far:.3g} m from the origin, where coordinates are known to {precision:.2g} m, a "
-                f"share of the element size of {', '.join(near)}: gaps and penetrations are round-off below that (a "
-                f"penalty's are ~1e-7 of the element size at alpha 1e4), and the answer may be off with no other "
-                f"sign; move the scene nearer the origin")
+        listed = ", ".join(f"{name} ({reach:.3g} m out, known to {eps * reach:.2g} m, {eps * reach / h:.2g} of its "
+                           f"element size {h:.3g} m)" for name, h, reach in near)
+        line = (f"far from the origin: {listed}: gaps and penetrations are round-off below that (a penalty's are "
+                f"~1e-7 of the element size at alpha 1e4), and the answer may be off with no other sign; move the "
+                f"scene nearer the origin")
         return [line]
 
     def _phase(self, name):
@@ -1022,16 +1031,23 @@ class ContactModel:
             normal = np.where(length[:, None] > 0, flat / np.where(length > 0, length, 1.0)[:, None], normal)
         return area, normal
 
-    @staticmethod
-    def _feature_advice(pd, fold):
-        """What feature_angle can do for sunk nodes whose surface folds `fold` degrees there (ridge_tilts)."""
+    def _feature_advice(self, pd, fold, sides):
+        """What feature_angle can do for the sunk nodes of `sides` whose surface folds `fold` degrees there
+        (ridge_tilts)."""
         angle, key = pd["spec"].feature_angle, f"contact[{pd['index']}].feature_angle"
         if fold < FLAT_FOLD:
-            # a knife's edge pressing into a plate: the plate's nodes (hunt30_5 A)
-            return ("; they lie where their surface is flat, which no feature_angle takes in: a sharp edge or corner "
-                    "of the other surface presses into them" + (
-                        f", and {key} below its fold gives its nodes, and the nodes they press, nodal rows of "
-                        f"their own" if angle is None else ""))
+            # a knife's edge pressing into a plate: the plate's nodes (hunt30_5 A), held by feature_angle below the
+            # knife's fold (hunt30_7 F2: with the angle above it the advice said nothing could)
+            other = [self.comm.allreduce(float(pd["folds"][s].max(initial=0.0)), op=MPI.MAX)
+                     for s in ("slave", "master") if s not in sides] or [0.0]
+            sharpest = np.degrees(max(other))
+            what = "; they lie where their surface is flat: a sharp edge or corner of the other surface presses into them"
+            if sharpest < FLAT_FOLD:
+                return what
+            if angle is None or angle >= sharpest:
+                return (what + f", whose sharpest fold is {sharpest:.0f} degrees: {key} below that gives its nodes, "
+                        f"and the nodes they press, nodal rows of their own")
+            return what
         if angle is None:
             return (f"; or set {key} below {fold:.0f} degrees (their fold), which gives such nodes nodal rows of their "
                     f"own with any formulation and rule")
@@ -1074,7 +1090,7 @@ class ContactModel:
                 cure = ("nodal rows of master_slave or two_pass hold it" if list(sunk) == ["slave"] else
                         "master_slave never holds the master's nodes: make the sharp (or finer) surface the slave with "
                         "nodal rows of master_slave, or use two_pass with nodal rows")
-                cure += self._feature_advice(pd, max(sunk.values()))
+                cure += self._feature_advice(pd, max(sunk.values()), list(sunk))
                 lines.append(
                     f"{name}: {' and '.join(sunk)} nodes with no contact force penetrate the other surface by up to "
                     f"{depth:.3g} m = {depth / pd['h_eff']:.2g} h_eff: no row holds them. A sharp edge or corner (or a "
