@@ -500,10 +500,12 @@ CONTACT = Table({
                                 "(paper [8]-[10]); the same with nodal integration.", default="slave_at_points"),
     "feature_angle": Float("Sharp edges and corners: the nodes of either surface where it folds convexly, its faces "
                            "tilting on average by more than this angle from the node's normal (45 on a box's edge, "
-                           "a knife's faces' tilt from its edge's normal), take a nodal row of their own (a node "
-                           "against the other surface, as node-to-segment) in place of their weighted row, which "
-                           "would let them sink about h tan(angle) / 3 with no force (README: Sharp edges); absent: "
-                           "none.", gt=0, lt=90, default=None, unit="degrees"),
+                           "a knife's faces' tilt from its edge's normal) and whose faces lean from the other "
+                           "surface by more than it, take a nodal row of their own (a node against the other "
+                           "surface, as node-to-segment) in place of their weighted row, which would let them sink "
+                           "about h tan(angle) / 3 with no force, and the other surface's nodes under them a nodal "
+                           "row besides theirs (README: Sharp edges); absent: none.", gt=0, lt=90, default=None,
+                           unit="degrees"),
     "gauss_points": Int("Gauss points per direction on each face with integration = \"gauss\" (a triangle "
                         "gets a rule symmetric in its vertices, at least n^2 points exact to degree 2n - 2: 1, 6, 12, "
                         "16 points for n = 1-4, 3 n^2 above).", ge=1, le=10, default=3),
