@@ -486,6 +486,10 @@ FLAT_FOLD = 1.0
 # eps |x| passes this share of the pair's h_eff: the two cubes moved 1e6 m (eps |x| 3.4e-9 h) kept their answer,
 # 1e9 m (3.4e-6 h) read penetrations 2-15x off, 1e14 m 97 % off in displacement, each "ok" with no word (hunt30_4)
 COORDINATE_PRECISION = 1e-8
+# _gap_change's floor on the penetration it measures against: this times eps |x| (x: the pair's nodes) over
+# reuse_tolerance. Two searches of the same state moved the gaps by 0.1-0.15 eps |x| (the sliding cubes at alpha
+# 1e8 under a 2e-6 press: 3-6e-17 m against penetrations of 4e-15 m, which never settled; hunt30_7)
+GAP_ROUND_OFF = 0.3
 # large sliding (ContactModel._relaxation): the bounds of Aitken's relaxation of the search configuration (1.5
 # before the edge band: two_pass with nodal rows in 16 steps on the sliding cubes crept by 0.87 a search at 1.5
 # and did not settle in 20; at 5 and 10 every slide of sliding_cubes, 3 formulations x 3 rules x 1 / 2 / 16
@@ -760,7 +764,12 @@ class ContactModel:
             term.pressure_floor = FLOOR_STRAIN * pd["eps_n"] * pd["h_eff"] / spec.penalty
             change, reused = None, False
             if last is not None:
-                change = _gap_change(last, term, u)
+                nodes = np.concatenate([pd["slave"].nodes, pd["master"].nodes])
+                reach = self.comm.allreduce(float(np.abs(X[nodes] + U[nodes]).max(initial=0.0)), op=MPI.MAX)
+                # the depth no smaller than what the coordinates resolve at the pair's tolerance (GAP_ROUND_OFF)
+                floor = (GAP_ROUND_OFF * np.finfo(float).eps * reach / spec.reuse_tolerance
+                         if spec.reuse_tolerance > 0 else 0.0)
+                change = _gap_change(last, term, u, floor)
                 reused = change <= spec.reuse_tolerance
                 if not reused and term.lmbda is not None and last.lmbda is not None and self.comm.allreduce(
                         np.array_equal(last.rows, term.rows), op=MPI.LAND):
@@ -1132,14 +1141,17 @@ class ContactModel:
         self.current = []
 
 
-def _gap_change(last, new, u):
+def _gap_change(last, new, u, floor=0.0):
     """How far the rows of a pair's last term are from a new search's at u (collective): the largest difference
     of their gaps c / w over the rows, relative to the largest penetration of the new rows, a / eps_n with the
     row pressure a = lmbda + eps_n c / w of penalty.row_response (the augmented Lagrangian's multipliers
     lmbda, the last term's, count: its pressure is carried at a near-zero gap); inf when the two searches made
     different rows, or nothing presses on the new rows but something did on the last; 0 when nothing presses on
-    either. eps_n x this is the pressure error that keeping
-    the last rows makes at u, relative to the largest contact pressure."""
+    either. The penetration it is measured against is at least `floor` (m: the coordinates' round-off over the
+    pair's reuse_tolerance: a press so light that the penetrations are 4e-15 m stands within 1 % of the gaps'
+    round-off, by which large sliding at alpha 1e8 moved them at every search, and never settled; hunt30_7).
+    eps_n x this is the pressure error that keeping the last rows makes at u, relative to the largest contact
+    pressure."""
     comm = new.G.getComm().tompi4py()
     if not comm.allreduce(np.array_equal(last.rows, new.rows), op=MPI.LAND):
         return np.inf
@@ -1151,7 +1163,7 @@ def _gap_change(last, new, u):
     if change == 0.0:
         return 0.0
     if depth > 0:
-        return change / depth
+        return change / max(depth, floor)
     # nothing presses on the new rows: keeping the last ones makes no pressure error if nothing presses on them
     # either (an open gap's rows changed by round-off, or the surfaces lifted off)
     pressed_last = comm.allreduce(float((gaps[0] + carried).max(initial=0.0)), op=MPI.MAX)
