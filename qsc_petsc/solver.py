@@ -106,7 +106,7 @@ class ConstraintTerm:
         # G scaled by the rows' stiffnesses and G^T diag(d) G, kept so that each Jacobian redoes only the
         # product's numeric part (System._jacobian)
         self.DG = self.product = None
-        self.G_abs, self.scale = None, None      # the augmented Lagrangian's round-off (_row_scale)
+        self.G_abs = None        # |G|, for the augmented Lagrangian's round-off (_row_scale)
         # the d the product holds (None once it is changed in place); its pattern (G^T G's) and the pattern's digest
         self.product_d = self.pattern = self.pattern_digest = None
         w = W.getArray()
@@ -140,7 +140,7 @@ class ConstraintTerm:
         return self.c.getArray()[self.rows]
 
     def _row_scale(self, u):
-        """self.scale: |G| |u| + |g| on the existing rows, the size of the terms whose sum C is (collective)."""
+        """|G| |u| + |g| on the existing rows: the size of the terms whose sum C is (collective)."""
         if self.G_abs is None:
             self.G_abs = self.G.copy()
             ia, ja, a = self.G_abs.getValuesCSR()
@@ -150,15 +150,14 @@ class ConstraintTerm:
         ua.abs()
         out = self.G.createVecLeft()
         self.G_abs.mult(ua, out)
-        self.scale = out.getArray()[self.rows] + np.abs(self.g.getArray()[self.rows])
+        scale = out.getArray()[self.rows] + np.abs(self.g.getArray()[self.rows])
         for v in (ua, out):
             v.destroy()
+        return scale
 
     def evaluate(self, u):
         """Row values, multipliers and active set at u (collective)."""
         c = self.row_values(u)
-        if self.augmented:
-            self._row_scale(u)
         tol = self.closed_tol
         if self.start == START_REACH:
             tol = np.full(len(c), np.inf)
@@ -223,8 +222,8 @@ class ConstraintTerm:
             if mat is not None:
                 mat.destroy()
 
-    def next_multipliers(self):
-        """The augmented Lagrangian's Uzawa step from the last evaluate, not applied: (new multipliers, their
+    def next_multipliers(self, u):
+        """The augmented Lagrangian's Uzawa step from the last evaluate, at u, not applied: (new multipliers, their
         relative change, the change's round-off bound, AUGMENTED_ROUND_OFF) (collective). Left unapplied once every
         term has settled, the answer keeps the multipliers it was solved with, so that its contact forces balance
         the bodies' (an applied update would add its change to the forces reported at the same displacement)."""
@@ -241,7 +240,7 @@ class ConstraintTerm:
         # the rows' round-off, eps (|G| |u| + |g|) in C, is eps_n eps (|G| |u| + |g|) / W in a multiplier: on the
         # rows that hold one, the floor of the updates' change (AUGMENTED_ROUND_OFF)
         held = ~sliver & ((new > 0) | (self.lmbda > 0))
-        noise = np.sum((self.eps_n * np.finfo(float).eps * self.scale[held] / W[held]) ** 2)
+        noise = np.sum((self.eps_n * np.finfo(float).eps * self._row_scale(u)[held] / W[held]) ** 2)
         change, size, count, noise = comm.allreduce(
             np.array([np.sum((new - self.lmbda) ** 2), np.sum(new ** 2), len(new), noise], dtype=float), op=MPI.SUM)
         # relative to the multipliers, or to pressure_floor on every row where they are smaller: a contact that
@@ -1077,7 +1076,7 @@ def _solve_enforced(system, step, t, start, augmented_max):
     stats["multipliers_at_round_off"] = None
     outer = 0
     while ok and augmented:
-        steps = [(term, *term.next_multipliers()) for term in augmented]
+        steps = [(term, *term.next_multipliers(u_new)) for term in augmented]
         outer += 1
         if all(change <= max(term.augmented_tolerance, bound) for term, _, change, bound in steps):
             # a tolerance under the multipliers' round-off is met at that round-off, and said (Run)

@@ -158,16 +158,10 @@ def symmetry_components(mesh, scene):
     return on
 
 
-def feature_nodes(mesh, S, angle, mirrored=None):
-    """A mask over S's owned nodes: those where S folds convexly by more than `angle` (radians) in the reference
-    configuration (ridge_tilts), the sharp edges and corners that weighted gaps let through
-    (contact[].feature_angle). Collective."""
-    return ridge_tilts(mesh, S, mirrored) > angle
-
-
 def ridge_tilts(mesh, S, mirrored=None):
     """Per owned node of S, how far (radians) S folds convexly there in the reference configuration; 0 where it is
-    flat or folds the other way (a valley). A node's
+    flat or folds the other way (a valley). Those above contact[].feature_angle are the feature nodes, the sharp
+    edges and corners that weighted gaps let through. A node's
     faces tilt from its angle-weighted normal m by arccos(|sum w n_f| / sum w) on average (w: the faces' angles at
     the node, n_f their centroid normals): 45 degrees on a box's edge, 54.7 at its corner, a knife's faces' tilt
     from its edge's normal; the fold is convex when the faces' centroids lie behind the node along m, as on a
@@ -277,8 +271,7 @@ def facing_areas(mesh, S, X, U, which, found):
     numbers). A surface that holds faces beside the contact (a punch's whole skin: its sides) gave its edge nodes
     the sides' areas too: their nodal rows, tractions and the contact area counted them (a punch's contact area
     0.54 against 0.36 m2; hunt28_3). Collective."""
-    _, _, nodal, away = _turned_faces(mesh, S, X, U, which, found)
-    ref = fem.centroid_normals(mesh.face_type, X[S.faces]) if len(S.faces) else np.zeros((0, 3))
+    _, ref, nodal, away = _turned_faces(mesh, S, X, U, which, found)
     values = np.zeros(nodal.shape + (3,))
     values[..., 0] = nodal * away
     away_area = _nodal_sums(mesh, S.faces, values, S.nodes[which], S.template)[:, 0]
@@ -293,8 +286,8 @@ def facing_areas(mesh, S, X, U, which, found):
 
 def _turned_faces(mesh, S, X, U, which, found):
     """Per face node of S's local faces (k, nv): the outward normal of the T face that node found (zero: none or
-    not among `which`), the faces' centroid normals now (k, 3), their reference nodal areas, and whether the face
-    is turned away from the T face its node found (search.FACING). Collective."""
+    not among `which`), the faces' reference centroid normals (k, 3), their reference nodal areas, and whether
+    the face is turned away (now) from the T face its node found (search.FACING). Collective."""
     ok = found["face"] >= 0
     target = S.template.duplicate()
     target.set(0.0)
@@ -303,11 +296,13 @@ def _turned_faces(mesh, S, X, U, which, found):
     target.destroy()
     if len(S.faces):
         now = fem.centroid_normals(mesh.face_type, (X + U)[S.faces])
+        ref = fem.centroid_normals(mesh.face_type, X[S.faces])
         nodal = fem.face_nodal_areas(mesh.face_type, X[S.faces])
     else:
-        now, nodal = np.zeros((0, 3)), np.zeros((0, S.faces.shape[1]))
+        now = ref = np.zeros((0, 3))
+        nodal = np.zeros((0, S.faces.shape[1]))
     away = (np.abs(faced).sum(axis=2) > 0) & ~facing_pairs(faced, np.broadcast_to(now[:, None, :], faced.shape))
-    return faced, now, nodal, away
+    return faced, ref, nodal, away
 
 
 def facing_lean(mesh, S, X, U, which, found):
@@ -317,9 +312,8 @@ def facing_lean(mesh, S, X, U, which, found):
     edge whose faces stand theta from it (1: a node that found no face). The reference normals: an edge that its
     nodal row held up flattened its faces below the angle, lost its row and sank at every other step (hunt30_3).
     Collective."""
-    faced, _, nodal, away = _turned_faces(mesh, S, X, U, which, found)
+    faced, ref, nodal, away = _turned_faces(mesh, S, X, U, which, found)
     turned = nodal * ((np.abs(faced).sum(axis=2) > 0) & ~away)
-    ref = fem.centroid_normals(mesh.face_type, X[S.faces]) if len(S.faces) else np.zeros((0, 3))
     values = np.zeros(nodal.shape + (3,))
     values[..., 0] = turned
     values[..., 1] = turned * -np.einsum("ki,kvi->kv", ref, faced)
@@ -431,13 +425,12 @@ def touching_sizes(mesh, S, M):
 def contact_pairs_data(mesh, scene, template, mirrored=None):
     """Surfaces, penalty scale and search radius of every contact pair."""
     pairs = []
+    mirrored = symmetry_components(mesh, scene) if mirrored is None else mirrored
     for i, pair in enumerate(scene.contact):
         S = surface_data(mesh, pair.slave, template)
         M = surface_data(mesh, pair.master, template)
         E = min(scene.bodies[S.body].material.youngs_modulus, scene.bodies[M.body].material.youngs_modulus)
         h_eff = min(touching_sizes(mesh, S, M))
-        if mirrored is None:
-            mirrored = symmetry_components(mesh, scene)
         # each side's convex folds (the unforced warning says the deepest sunk node's), and with feature_angle its
         # feature nodes
         folds = {"slave": ridge_tilts(mesh, S, mirrored), "master": ridge_tilts(mesh, M, mirrored)}
@@ -781,7 +774,7 @@ class ContactModel:
         return term
 
     def _feature_passes(self, pd, X, U):
-        """The nodal passes against the other surface of the feature nodes (feature_nodes), the global row ids of
+        """The nodal passes against the other surface of the feature nodes (ridge_tilts), the global row ids of
         those that found a face (every rank's), whose rows are to be these, and the nodal passes of the nodes that
         face one (_facing_features), whose rows are added (rows.with_nodal_rows). Collective."""
         passes, ids, sharp, extra = [], [], {}, []

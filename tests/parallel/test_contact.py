@@ -333,10 +333,10 @@ def test_a_knife_that_passes_through_its_rows_is_said(comm, mpi_tmp, formulation
 
 
 def test_feature_nodes_are_the_ridges_sharper_than_the_angle(comm, mpi_tmp):
-    """feature_nodes on a cube's whole skin (4 x 4 x 4 hexes): the 8 corners (their faces tilt 54.7 degrees from the
+    """The feature nodes (ridge_tilts above the angle) on a cube's whole skin (4 x 4 x 4 hexes): the 8 corners (their faces tilt 54.7 degrees from the
     corner's normal) and the 12 edges' 3 inner nodes each (45 degrees) at 30 degrees, the corners alone at 50; none
     on the plate's flat top, whose border nodes have faces on one side only. `qsc check` says both counts."""
-    from qsc_petsc.contact.model import contact_plan, feature_nodes
+    from qsc_petsc.contact.model import contact_plan, ridge_tilts
     if comm.rank == 0:
         write_gmsh_box(mpi_tmp / "plate.msh", None, (5, 5, 1), "hex", (0.0, 0.0, 0.0), (1.0, 1.0, 0.2))
         write_gmsh_box(mpi_tmp / "punch.msh", None, (4, 4, 4), "hex", (0.3, 0.3, 0.2), (0.4, 0.4, 0.4))
@@ -345,7 +345,7 @@ def test_feature_nodes_are_the_ridges_sharper_than_the_angle(comm, mpi_tmp):
     comm.barrier()
     run, _ = run_scene(mpi_tmp / "s.toml", mpi_tmp / "o", ["contact.0.feature_angle=30"], comm)
     pd = run.contact.pairs[0]
-    counts = [comm.allreduce(int(feature_nodes(run.mesh, S, np.radians(angle)).sum()), op=MPI.SUM)
+    counts = [comm.allreduce(int((ridge_tilts(run.mesh, S) > np.radians(angle)).sum()), op=MPI.SUM)
               for S in (pd["slave"], pd["master"]) for angle in (30, 50)]
     plan = contact_plan(run.mesh, run.scene)
     run.destroy()
