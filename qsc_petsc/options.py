@@ -120,15 +120,17 @@ def options_in_effect():
     return dict(sorted(PETSc.Options().getAll().items()))
 
 
-def options_text(options, from_scene, settings=()):
-    """petsc_options.txt: the options database (source: scene [petsc] table, command line, environment or program
-    default),
+def options_text(options, from_scene, settings=(), scene_defaults=None):
+    """petsc_options.txt: the options database (source: scene [petsc] table, or that table's default when the
+    value is `scene_defaults`' ({key: value}, without the prefix), command line, environment or program default),
     then `settings`, lines naming what the solver objects hold that no option in the database says."""
-    header = ("# PETSc options in the database (source: scene [petsc] table, command line, environment (PETSC_OPTIONS "
-              "or a .petscrc) or program default)")
+    header = ("# PETSc options in the database (source: scene [petsc] table or its default, command line, environment "
+              "(PETSC_OPTIONS or a .petscrc) or program default)")
+    defaults = {PREFIX + key: str(value) for key, value in (scene_defaults or {}).items()}
     lines = [header]
     for name, value in options.items():
-        source = ("scene" if name in from_scene else "command line" if name in _COMMAND_LINE else
+        source = (("scene default" if defaults.get(name) == value else "scene") if name in from_scene else
+                  "command line" if name in _COMMAND_LINE else
                   "environment" if name in _AT_START_UP else "program default")
         lines.append(f"-{name}" + (f" {value}" if value not in (None, "") else "") + f"    # {source}")
     if settings:

@@ -298,6 +298,7 @@ class BandComposite:
         self.slip, self.soften, self.symmetric = slip, soften, symmetric
         self.ready = False
         self.columns = self.band_rows = self.jy = self.work = None
+        self.defaults = {}      # {option: value} qsc put in the database for the multigrid's setup alone
 
     def setUp(self, pc):
         _, P = pc.getOperators()
@@ -410,7 +411,9 @@ def install_band_pc(ksp, band, comm, coarse=None, soften=None):
     pc = PETSc.PC().create(comm=comm)
     pc.setOptionsPrefix("qsc_")
     pc.setType("python")
-    pc.setPythonContext(BandComposite(amg, BandSolve(band, comm), parts, slip, soften, symmetric=krylov == "cg"))
+    composite = BandComposite(amg, BandSolve(band, comm), parts, slip, soften, symmetric=krylov == "cg")
+    composite.defaults = added           # what petsc_options.txt says the multigrid read from qsc
+    pc.setPythonContext(composite)
     ksp.setPC(pc)
     return n_band, parts
 

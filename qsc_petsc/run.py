@@ -17,6 +17,7 @@ from .errors import OutputError, QscError, SceneError
 from .mesh import distribute_mesh, on_root
 from .output import ResultWriter, check_output_folder, clear_results, write_json, write_on_root
 from .restraint import Restraint, describe
+from .scene import PETSC_DEFAULTS
 from .solver import AUGMENTED_ROUND_OFF, ROUND_OFF_WARNING, System, solve_load_step
 
 # Runs built and not yet destroyed, as weak references in creation order (the same order on every rank).
@@ -402,7 +403,8 @@ class Run:
         """petsc_options.txt (collective)."""
         path = self.out / "petsc_options.txt"
         write_on_root(self.comm, path,
-                      lambda: path.write_text(options.options_text(in_effect, self.from_scene, settings)))
+                      lambda: path.write_text(options.options_text(in_effect, self.from_scene, settings,
+                                                                   PETSC_DEFAULTS)))
 
     def _step_record(self, step, t, stats, u, ul):
         last = stats["solves"][-1]

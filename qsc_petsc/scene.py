@@ -432,6 +432,8 @@ class Options(Field):
 
 # ---------------------------------------------------------------- the schema
 
+PETSC_DEFAULTS = {"ksp_rtol": "1e-10"}      # the [petsc] table's defaults (petsc_options.txt says which)
+
 BODY = Table({
     "name": Str("Unique body name, used in \"body.surface\" references.", pattern=BODY_NAME),
     "mesh": Variant("type", "How the body is meshed: a generated box, a mesh file, or a part of the "
@@ -606,7 +608,7 @@ SCHEMA = Table({
                                    "bodies sliding on each other).", default=True),
     }, "Nonlinear solver controls."),
     "petsc": Options(f"PETSc options without the {OPTIONS_PREFIX!r} prefix, nested tables joined by \"_\"; "
-                     "merged over the defaults.", default={"ksp_rtol": "1e-10"}),
+                     "merged over the defaults.", default=PETSC_DEFAULTS),
     "output": Table({
         "directory": Str("Output folder; {name} is the scene name; relative to the working directory.",
                          default="results/{name}"),

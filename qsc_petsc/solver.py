@@ -994,6 +994,10 @@ class System:
                          + (f" a Galerkin correction on {context.slip.modes()} slip modes and" if context.slip else "")
                          + f" the band's {band.getType()} ({band.getFactorSolverType()}) on {self.band_dofs} dofs"
                          + (" (symmetric: the multigrid again)" if context.symmetric else ""))
+            if context.defaults:
+                # inserted for the multigrid's setup and taken out again, so the database above does not hold them
+                lines.append("# the multigrid read qsc's defaults: "
+                             + " ".join(f"-{name} {value}" for name, value in context.defaults.items()))
         else:
             factor = pc.getFactorSolverType() if pc.getType() in ("lu", "cholesky") else None
             lines.append(f"# pc: {pc.getType()}" + (f" ({factor})" if factor else ""))
@@ -1175,6 +1179,13 @@ def solve_load_step(system, step, t_prev, t_target, u, update_terms, max_cutback
             free = stats.get("free_motion", "")
             why = (f"; an iterate left {free} held by no boundary and no closed contact row (a body held only "
                    f"by contact that separates has no equilibrium)") if free else ""
+            single = _single_application(system)
+            if single:
+                # its Newton steps are not the Jacobian's: wrong iterates open rows that hold, so the free
+                # motion above would send the user to the boundaries
+                why = (f"; each linear solve was one application of pc_type {single} (ksp_type preonly), not a "
+                       f"solve: the Newton steps were not the Jacobian's (preonly needs an exact factorization, "
+                       f"-qsc_pc_type lu or cholesky; or leave ksp_type to qsc)")
             if stats.get("linear_short"):
                 why = ("; a linear solve stopped with its residual far above the Newton target and its step no "
                        "correction (-qsc_ksp_atol above the residual, or -qsc_ksp_rtol near 1): lower them, or "
@@ -1202,6 +1213,19 @@ def solve_load_step(system, step, t_prev, t_target, u, update_terms, max_cutback
                 f"KSP {stats['ksp_reason']}{why}")
         dt *= 0.5
     return u, {"cutbacks": cutbacks, "solves": records}, before
+
+
+EXACT_PCS = ("lu", "cholesky", "qr", "svd", "redundant", "telescope", "fieldsplit", "composite", "ksp", "shell")
+
+
+def _single_application(system):
+    """The PC type when the linear solver is preonly with a preconditioner that is no exact solve (jacobi, ilu,
+    hypre...; a PC type that may be exact, as a redundant or fieldsplit one, is given the benefit), else None."""
+    ksp = system.snes.getKSP()
+    pc = ksp.getPC().getType()
+    if ksp.getType() != "preonly" or pc in EXACT_PCS:
+        return None
+    return "python (the contact band composite: a V-cycle and the band's solve)" if pc == "python" else pc
 
 
 def _check_held(system, step):

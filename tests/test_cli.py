@@ -667,8 +667,26 @@ def test_an_unprefixed_option_from_the_environment_is_left_alone(tmp_path):
     proc = subprocess.run([sys.executable, "-m", "qsc_petsc.cli", "run", str(CONFIGS / "block_compression.toml"),
                            "--out", str(tmp_path)], capture_output=True, text=True, timeout=120, check=False, env=env)
     assert proc.returncode == 0, proc.stdout + proc.stderr
-    # petsc_options.txt says where it came from (it read "command line"; hunt30_6)
-    assert "-ksp_converged_reason    # environment" in (tmp_path / "petsc_options.txt").read_text()
+    # petsc_options.txt says where it came from (it read "command line"; hunt30_6), and the [petsc] table's own
+    # default is no option the scene wrote (it read "scene")
+    text = (tmp_path / "petsc_options.txt").read_text()
+    assert "-ksp_converged_reason    # environment" in text and "-qsc_ksp_rtol 1e-10    # scene default" in text
+
+
+def test_petsc_options_txt_lists_the_multigrids_defaults(tmp_path):
+    """qsc's BoomerAMG defaults for the contact band's multigrid are put in the database for its setup and taken
+    out again: petsc_options.txt listed neither them nor what BoomerAMG held (hunt30_6); its settings say them,
+    less an option the user set."""
+    scene = tmp_path / "pt.toml"
+    scene.write_text((CONFIGS / "patch_test.toml").read_text().split("[petsc]")[0])
+    proc = subprocess.run([sys.executable, "-m", "qsc_petsc.cli", "run", str(scene), "--out", str(tmp_path / "o"),
+                           "-qsc_pc_hypre_boomeramg_P_max", "3"], capture_output=True, text=True, timeout=120,
+                          check=False)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    text = (tmp_path / "o" / "petsc_options.txt").read_text()
+    line = next(x for x in text.splitlines() if x.startswith("# the multigrid read qsc's defaults: "))
+    assert "-qsc_pc_hypre_boomeramg_coarsen_type PMIS" in line and "P_max" not in line, text
+    assert "-qsc_pc_hypre_boomeramg_P_max 3    # command line" in text, text
 
 
 @pytest.mark.parametrize("option, holder", [
@@ -692,7 +710,8 @@ def test_a_viewer_option_with_a_bad_value_is_an_input_error(tmp_path, option, ho
     assert proc.returncode == 0 and "Linear qsc_ solve converged due to" in proc.stdout, proc.stdout + proc.stderr
 
 
-@pytest.mark.parametrize("case", ["rtol 1", "atol above", "minres", "no cholesky", "value-less", "viewer file"])
+@pytest.mark.parametrize("case", ["rtol 1", "atol above", "minres", "no cholesky", "value-less", "viewer file",
+                                  "preonly jacobi"])
 def test_solver_options_that_cannot_work_end_cleanly(tmp_path, case):
     """Options a PETSc user may try, each of which ended in a wrong answer with exit 0 or a traceback with exit 1
     (hunt30_6): -qsc_ksp_rtol 1 stops every linear solve before its first iteration, and the zero Newton steps
@@ -701,7 +720,8 @@ def test_solver_options_that_cannot_work_end_cleanly(tmp_path, case):
     again writing petsc_options.txt (exit 1): exit 3 with the file written; a Cholesky no package provides, met
     at set-up (exit 1, no summary): exit 2; a refused value beside a value-less option crashed naming it (exit
     1); an ASCII viewer's file that cannot be written, which rank 0 alone opens, left the others waiting: exit 2
-    before the run."""
+    before the run; preonly with an inexact preconditioner failed naming a body held by no boundary (its wrong
+    iterates opened the holding rows): exit 3 naming the one application instead."""
     options, code, said = {
         "rtol 1": (["-qsc_ksp_rtol", "1"], 2, "-qsc_ksp_rtol: must be below 1"),
         "atol above": (["-qsc_ksp_type", "cg", "-qsc_ksp_atol", "1"], 3,
@@ -714,6 +734,8 @@ def test_solver_options_that_cannot_work_end_cleanly(tmp_path, case):
                        + "or ascii:FILE) in -qsc_ksp_monitor ("),
         "viewer file": (["-qsc_snes_converged_reason", "ascii:/nonexistent/f.txt"], 2,
                         "a file that cannot be opened in -qsc_snes_converged_reason ('/nonexistent/f.txt'"),
+        "preonly jacobi": (["-qsc_ksp_type", "preonly", "-qsc_pc_type", "jacobi", "-qsc_snes_max_it", "5"], 3,
+                           "each linear solve was one application of pc_type jacobi (ksp_type preonly), not a solve"),
     }[case]
     proc = subprocess.run([sys.executable, "-m", "qsc_petsc.cli", "run", str(CONFIGS / "block_compression.toml"),
                            "--out", str(tmp_path), *options], capture_output=True, text=True, timeout=120,
