@@ -302,7 +302,7 @@ class Run:
         scene, system = self.scene, self.system
         n_steps = scene.load.steps
         u = system.u.copy()
-        update = (lambda u, t: self.contact.terms(u, t)) if self.contact else (lambda u, t: [])
+        update = (lambda u, t, t0: self.contact.terms(u, t, t0)) if self.contact else (lambda u, t, t0: [])
         large = [pair for pair in scene.contact if pair.sliding == "large"]
         settle = self.contact.settle if large else None
         max_searches = max((pair.max_searches for pair in large), default=2)

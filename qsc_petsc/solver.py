@@ -1128,7 +1128,7 @@ def solve_load_step(system, step, t_prev, t_target, u, update_terms, max_cutback
     failed = False
     while t < t_target - 1e-14:
         t_try = min(t + dt, t_target)
-        system.set_terms(update_terms(u, t_try))
+        system.set_terms(update_terms(u, t_try, t))
         _check_held(system, step)
         path = None if failed else before          # a try after a failed one starts from the converged state
         start = extrapolate(path, t, u, t_try)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from conftest import run_scene, write_gmsh
 
-from qsc_petsc import fem
+from qsc_petsc import fem, solver
 from qsc_petsc.meshgen import box_mesh
 from qsc_petsc.scene import SceneError, load_scene
 
@@ -260,3 +260,78 @@ def test_every_loose_body_is_named_when_no_force_is_carried(tmp_path):
     assert summary["status"] == "ok"
     assert summary["steps"][-1]["loose"] == ("b0 (translation z); b1 (translation z); b2 (translation z); "
                                              "b3 (translation z)")
+
+
+STICK = """\
+name = "stick"
+[[bodies]]
+name = "blk"
+mesh = {{ type = "box", origin = [0, 0, 0], size = [1, 1, 1], cells = [4, 4, 4] }}
+material = {{ youngs_modulus = 1000.0, poissons_ratio = 0.3 }}
+{support}
+[[die]]
+name = "top"
+point = [0, 0, {top}]
+normal = [0, 0, -1]
+motion = {motion}
+surfaces = ["blk.zmax"]
+condition = "sticking"
+[load]
+steps = {steps}
+[petsc]
+ksp_type = "preonly"
+pc_type = "lu"
+pc_factor_mat_solver_type = "mumps"
+"""
+FLOOR = """[[die]]
+name = "bottom"
+point = [0, 0, 0]
+normal = [0, 0, 1]
+surfaces = ["blk.zmin"]
+condition = "sticking\""""
+
+
+def _top_force(summary, step=-1):
+    return np.array(summary["steps"][step]["contact"]["die[1] top"]["force_on_bodies"])
+
+
+@pytest.mark.parametrize("cut", [False, True])
+def test_a_sticking_die_holds_a_node_where_it_met_it(tmp_path, monkeypatch, cut):
+    """A sticking die measured the slip from the undeformed state: a die that reached a block 0.05 m below it
+    after moving 0.025 m sideways sheared it by its whole travel, 14.0 N against 7.0 (hunt31_2). Its nodes
+    stick where they meet the die: here 0.045 m below, met halfway through the 5th step, the answer of the die
+    that starts on the block and moves the rest of the way, and no force before; also when that step's first
+    try fails and is cut back into one that ends on the die and one that starts there."""
+    if cut:
+        real, failed = solver._solve_enforced, []
+
+        def fail_once(system, step, t_try, *args):
+            ok, u, stats = real(system, step, t_try, *args)
+            if step == 5 and not failed:
+                failed.append(t_try)
+                return False, u, stats
+            return ok, u, stats
+        monkeypatch.setattr(solver, "_solve_enforced", fail_once)
+    gap = STICK.format(support=FLOOR, top=1.045, motion="[0.05, 0, -0.1]", steps=10)
+    _, summary = run_scene(_write(tmp_path, "gap", gap), tmp_path / "gap")
+    monkeypatch.undo()
+    ref = STICK.format(support=FLOOR, top=1.0, motion="[0.0275, 0, -0.055]", steps=5)
+    _, reference = run_scene(_write(tmp_path, "ref", ref), tmp_path / "ref")
+    assert summary["status"] == "ok" and summary["steps"][4]["cutbacks"] == int(cut)
+    assert np.abs(_top_force(summary, 3)).max() < 1e-9
+    assert _top_force(summary) == pytest.approx(_top_force(reference), rel=1e-8, abs=1e-8)
+    assert _top_force(summary)[0] == pytest.approx(7.702, abs=1e-3)      # 7.002 N a 0.025 m shear (hunt31_2)
+
+
+def test_a_sticking_die_does_not_pull_a_carried_body_back(tmp_path):
+    """A block carried 0.05 m sideways by its support, a sticking die coming straight down onto it: on touching
+    the die pulled its top back to where it started (ux 0.02 -> 0, hunt31_2). The top now stays where the die met
+    it, to within its own travel over the touching increment (0.005 m), while the support goes on."""
+    support = '[[boundary]]\nsurface = "blk.zmin"\ntype = "displacement"\nux = 0.05\nuy = 0.0\nuz = 0.0'
+    scene = STICK.format(support=support, top=1.05, motion="[0, 0, -0.1]", steps=10)
+    _, summary = run_scene(_write(tmp_path, "carried", scene), tmp_path / "out")
+    assert summary["status"] == "ok"
+    u = meshio.read(tmp_path / "out" / "steps" / "step_0010.xdmf")
+    top = u.points[:, 2] > 1.0 - 1e-9
+    ux = u.point_data["displacement"][top, 0]
+    assert ux.min() > 0.02 - 1e-3 and ux.max() < 0.025 + 1e-3, ux

@@ -236,7 +236,9 @@ def test_finite_sliding_nodes_out_of_reach_cannot_go_in_unheld(tmp_path):
     _, eight = run_scene(path, tmp_path / "eight", ["load.steps=8"])
     assert not any(s["cutbacks"] for s in eight["steps"])
     forces = [next(iter(r["steps"][-1]["contact"].values()))["total_normal_force"] for r in (one, eight)]
-    assert forces[0] == pytest.approx(forces[1], rel=5e-3)
+    # 0.65 % apart: the sticking floor's nodes that lift (15 -> 25 of 45 over the 8 steps) and come down again
+    # stick where they land, which depends on the increments (0.18 % while they went back to where they started)
+    assert forces[0] == pytest.approx(forces[1], rel=1e-2)
     with pytest.raises(ConvergenceError, match=r"contact\[0\] \(upper.zmin / lower.zmax\): \d+ node\(s\) without a "
                                                r"row at the increment's start \(farther than contact\[i\]"
                                                r"\.search_distance .* use more load steps or sliding = \"large\""):

@@ -582,8 +582,9 @@ class ContactModel:
         return ConstraintTerm(name, G, g, W, rows.phi, eps_n, closed, gate, augmented, node_local, alpha,
                               digest=digest)
 
-    def terms(self, u, t):
-        """New search at the current displacement u, load factor t: one ConstraintTerm per pair and die. A pair
+    def terms(self, u, t, t0=0.0):
+        """New search at the current displacement u, the converged state at load factor t0, for the increment to
+        load factor t: one ConstraintTerm per pair and die. A pair
         with small sliding keeps the term of its first search (its rows and, with the augmented Lagrangian,
         its multipliers); one with finite or large sliding keeps its last term when the new search's rows are
         those rows with gaps within reuse_tolerance of them (_gap_change)."""
@@ -629,11 +630,41 @@ class ContactModel:
                 dd["near"] = near                   # the nodes with rows (missed)
                 toward = {"face": np.zeros(len(v), dtype=np.int64), "normal": np.tile(n, (len(v), 1))}
                 dd["area"] = facing_areas(mesh, S, X, U, slice(None), toward)[0]
+                anchor = self._stick_anchors(dd, X, U, t, t0)[near] if spec.condition == "sticking" else None
                 rows = row_builders.die_rows(mesh.gvert[v[near]], dd["area"][near], X[v[near]], spec.point, n,
-                                             u_die, spec.condition == "sticking")
+                                             u_die, spec.condition == "sticking", anchor)
                 out.append(self._term(f"die[{dd['index']}]", rows, dd["eps_n"], dd["h"], False, node_local=True))
         self.current = out
         return out
+
+    def _stick_anchors(self, dd, X, U, t, t0):
+        """A sticking die's anchors (die_rows): where on the die, in its tangents, each of its nodes sticks during
+        the increment from the converged state U at load factor t0 to t. A node that touched the die at t0 keeps
+        the anchor it was held at; one apart from it sticks where it would meet the die: its place at t0 against
+        the die moved on until the gap d0 it had is closed (the die's approach along n over the increment; at
+        t0 when the die does not approach, the body moving onto it). The anchors measured the slip from the
+        undeformed state: a block that a die reached after moving sideways 0.025 was sheared by the die's whole
+        travel, 2x the force (hunt31_2). A try from the same t0 (after a cutback) starts from the same anchors."""
+        spec, v = dd["spec"], dd["nodes"]
+        n, motion = np.asarray(spec.normal, dtype=float), np.asarray(spec.motion, dtype=float)
+        T = row_builders.die_tangents(n)
+        state = dd.setdefault("stick", {"t0": 0.0, "held": np.zeros((len(v), 2)), "t": None, "used": None})
+        if state["t"] is not None and abs(t0 - state["t"]) <= 1e-12 and abs(t0 - state["t0"]) > 1e-12:
+            # the last try converged (its state is u): the nodes that touch the die at t0 keep its anchors
+            touching = _die_depth(dd, X, U, t0) > -self.scene.solver.active_set_tolerance * dd["h"]
+            state["held"] = np.where(touching[:, None], state["used"], 0.0)
+            state["t0"] = t0
+        elif abs(t0 - state["t0"]) > 1e-12:
+            raise RuntimeError(f"die[{dd['index']}]: an increment from load factor {t0} after tries at "
+                               f"{state['t0']} to {state['t']}")
+        depth = _die_depth(dd, X, U, t0)
+        touching = depth > -self.scene.solver.active_set_tolerance * dd["h"]
+        approach = (t - t0) * float(motion @ n)
+        meet = np.clip(-depth / approach, 0.0, 1.0) if approach > 0 else np.zeros(len(v))
+        fresh = (U[v] - (t0 + meet * (t - t0))[:, None] * motion) @ T.T
+        used = np.where(touching[:, None], state["held"], fresh)
+        state["t"], state["used"] = t, used
+        return used
 
     def missed(self, u):
         """After a converged solve: the first die or finite-sliding pair with nodes that had no row (out of its

@@ -354,6 +354,11 @@ def quasi_symmetric_master_nodes(slave_pass, master_pass, master_node_pass, weig
     return _rows([pass_rows(slave_pass, 2.0 * w_a), project_master_rows(R, master_node_pass)], 0.5)
 
 
+def die_tangents(n):
+    """The two tangents of a die's sticking rows (die_rows), as a (2, 3) array."""
+    return np.array(_tangent_basis(np.asarray(n, dtype=float).reshape(3)))
+
+
 def _tangent_basis(n):
     """Two unit tangents t1, t2 with (t1, t2, n) orthonormal, built deterministically from n."""
     e = np.zeros(3)
@@ -363,12 +368,14 @@ def _tangent_basis(n):
     return t1, np.cross(n, t1)
 
 
-def die_rows(node, area, xyz, point, normal, u_die, sticking=False):
+def die_rows(node, area, xyz, point, normal, u_die, sticking=False, anchor=None):
     """Rows of body nodes against a rigid plane (die) through `point` with unit `normal` pointing toward the body.
 
     h_k = -(u_k - u_die) . n - delta0_k, delta0_k = (x_k - point) . n (>= 0 apart);
     row 3 v: A_k h_k, phi = 1. With sticking, rows 3 v + 1 and 3 v + 2 add the
-    tangential equalities A_k (u_k - u_die) . t_i = 0, active iff row 3 v is.
+    tangential equalities A_k ((u_k - u_die) . t_i - a_ki) = 0, active iff row 3 v is, with t_i
+    die_tangents(normal) and a_k = anchor[k] (p, 2) the node's place on the die where it stuck (default 0:
+    where it started).
     """
     node = np.asarray(node, dtype=_I).reshape(-1)
     p = len(node)
@@ -390,8 +397,9 @@ def die_rows(node, area, xyz, point, normal, u_die, sticking=False):
     parts = [row_block(0, np.broadcast_to(-n, (p, 3)), delta0 - u_die @ n)]
     gate_rows, gate_of = _ints(), _ints()
     if sticking:
-        for slot, t in zip((1, 2), _tangent_basis(n)):
-            parts.append(row_block(slot, np.broadcast_to(t, (p, 3)), np.full(p, u_die @ t)))
+        anchor = np.zeros((p, 2)) if anchor is None else np.asarray(anchor, dtype=float).reshape(p, 2)
+        for i, (slot, t) in enumerate(zip((1, 2), _tangent_basis(n))):
+            parts.append(row_block(slot, np.broadcast_to(t, (p, 3)), u_die @ t + anchor[:, i]))
         gate_rows = np.concatenate([row + 1, row + 2])
         gate_of = np.concatenate([row, row])
     rows = _rows(parts, 1.0)
