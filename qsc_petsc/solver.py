@@ -1125,7 +1125,7 @@ def solve_load_step(system, step, t_prev, t_target, u, update_terms, max_cutback
     dt = t_target - t_prev
     t = t_prev
     cutbacks, records = 0, []
-    failed = False
+    failed, cause = False, None
     while t < t_target - 1e-14:
         t_try = min(t + dt, t_target)
         system.set_terms(update_terms(u, t_try, t))
@@ -1157,7 +1157,7 @@ def solve_load_step(system, step, t_prev, t_target, u, update_terms, max_cutback
             through = missed(u_new)
             if through:
                 ok = False
-                stats["snes_reason"], stats["out_of_reach"] = "OUT_OF_REACH", through
+                stats["snes_reason"], (stats["out_of_reach"], cause) = "OUT_OF_REACH", through
         stats.update(load_factor=t_try, searches=searches)
         records.append(stats)
         if ok:
@@ -1196,7 +1196,10 @@ def solve_load_step(system, step, t_prev, t_target, u, update_terms, max_cutback
                        f"augmented_tolerance {tol:g}) after {augmented_max} updates: raise "
                        f"{name}.augmented_max_iterations, or its penalty (the updates converge the faster the "
                        f"stiffer it is)")
-            if stats["snes_reason"] == "OUT_OF_REACH":
+            if stats["snes_reason"] == "OUT_OF_REACH" and cause == "away":
+                why = (f"; {stats['out_of_reach']} within the die's reach, of faces turned away from it, went "
+                       f"through it: {DIE_AWAY}")
+            elif stats["snes_reason"] == "OUT_OF_REACH":
                 what = stats["out_of_reach"]
                 why = (f"; {what} out of the die's reach at the increment's start went through it "
                        f"(raise die[i].search_distance, or use more load steps)" if what.startswith("die") else
@@ -1215,6 +1218,8 @@ def solve_load_step(system, step, t_prev, t_target, u, update_terms, max_cutback
     return u, {"cutbacks": cutbacks, "solves": records}, before
 
 
+DIE_AWAY = ("a die holds only the nodes of faces turned towards it; check the sign of its normal (from the die "
+            "toward the bodies), or list the surfaces that face it")
 EXACT_PCS = ("lu", "cholesky", "qr", "svd", "redundant", "telescope", "fieldsplit", "composite", "ksp", "shell")
 
 

@@ -5,8 +5,12 @@ import meshio
 import numpy as np
 import pytest
 from conftest import run_scene, write_gmsh
+from mpi4py import MPI
 
 from qsc_petsc import fem, solver
+from qsc_petsc.contact.model import contact_plan
+from qsc_petsc.errors import ConvergenceError
+from qsc_petsc.mesh import distribute_mesh
 from qsc_petsc.meshgen import box_mesh
 from qsc_petsc.scene import SceneError, load_scene
 
@@ -335,3 +339,24 @@ def test_a_sticking_die_does_not_pull_a_carried_body_back(tmp_path):
     top = u.points[:, 2] > 1.0 - 1e-9
     ux = u.point_data["displacement"][top, 0]
     assert ux.min() > 0.02 - 1e-3 and ux.max() < 0.025 + 1e-3, ux
+
+
+def test_a_die_turned_away_from_its_surface_says_so(tmp_path):
+    """A die whose normal points away from the bodies (or that lies on an edge of a surface that does not face
+    it) holds nothing: its nodes went through it and the run stopped saying they were out of the die's reach, to
+    raise search_distance, which changed nothing; `qsc check` said only "0 candidate rows" (hunt31_2). Both now
+    say that the nodes' faces turn away from the die, and what to check."""
+    scene_text = STICK.format(support=FLOOR, top=1.0, motion="[0, 0, 0.01]", steps=2).replace(
+        "normal = [0, 0, -1]", "normal = [0, 0, 1]")
+    path = _write(tmp_path, "turned", scene_text)
+    scene = load_scene(path)
+    lines = contact_plan(distribute_mesh(scene, MPI.COMM_WORLD), scene)
+    assert any(line.startswith("warning: die[1] top: 25 node(s) of its surfaces lie on or past its plane with faces "
+                               "turned away from it, and no row: a die holds only the nodes of faces turned towards "
+                               "it; check the sign of its normal") for line in lines), lines
+    right = load_scene(_write(tmp_path, "right", STICK.format(support=FLOOR, top=1.0, motion="[0, 0, -0.01]",
+                                                              steps=2)))
+    assert not any(line.startswith("warning") for line in contact_plan(distribute_mesh(right, MPI.COMM_WORLD), right))
+    with pytest.raises(ConvergenceError, match=r"die\[1\] \(top\): 25 node\(s\) within the die's reach, of faces "
+                                               r"turned away from it, went through it: a die holds only"):
+        run_scene(path, tmp_path / "out", ["solver.max_cutbacks=1"])

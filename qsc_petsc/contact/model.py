@@ -17,7 +17,7 @@ from petsc4py import PETSc
 from .. import assembly, fem
 from ..errors import SceneError
 from ..mesh import on_all
-from ..solver import FLOOR_STRAIN, ConstraintTerm, array_digest
+from ..solver import DIE_AWAY, FLOOR_STRAIN, ConstraintTerm, array_digest
 from . import quadrature
 from . import rows as row_builders
 from .geometry import _dot
@@ -626,8 +626,10 @@ class ContactModel:
                 # sides' areas (the contact area 1.5 for a 1 m2 face)
                 S = dd["surface"]
                 turned = facing_pairs(nodal_normals(mesh, S, X + U, by="angle"), n)
-                near = (-_die_depth(dd, X, U, t) <= dd["radius"]) & turned
+                within = -_die_depth(dd, X, U, t) <= dd["radius"]
+                near = within & turned
                 dd["near"] = near                   # the nodes with rows (missed)
+                dd["away"] = within & ~turned       # within reach, of faces turned away (missed, contact_plan)
                 toward = {"face": np.zeros(len(v), dtype=np.int64), "normal": np.tile(n, (len(v), 1))}
                 dd["area"] = facing_areas(mesh, S, X, U, slice(None), toward)[0]
                 anchor = self._stick_anchors(dd, X, U, t, t0)[near] if spec.condition == "sticking" else None
@@ -668,8 +670,10 @@ class ContactModel:
 
     def missed(self, u):
         """After a converged solve: the first die or finite-sliding pair with nodes that had no row (out of its
-        reach at the increment's search) and penetrate at u, as "die[i] (name): n node(s)" or "contact[i]
-        (slave / master): n node(s)", or None (collective). A node farther than the search distance at an
+        reach at the increment's search) and penetrate at u, as ("die[i] (name): n node(s)" or "contact[i]
+        (slave / master): n node(s)", cause), or None (collective). The cause is "reach", or "away" for a die's
+        nodes within its reach whose faces turn away from it (a normal given the wrong way round, or a surface
+        that does not face the die: its message said to raise the reach, which changed nothing; hunt31_2). A node farther than the search distance at an
         increment's start went through the die, or into the other surface, unheld (exit 0, no force).
 
         A pair's nodes are those of the sides that hold rows (the slave's; two_pass: the master's too): one
@@ -679,9 +683,12 @@ class ContactModel:
         mesh = self.mesh
         U, X = mesh.local_vectors(u), mesh.coords
         for dd in self.dies:             # dd["near"]: the nodes the increment's search (terms) gave rows
-            count = self.comm.allreduce(int((~dd["near"] & (_die_depth(dd, X, U, self.t) > 0)).sum()), op=MPI.SUM)
+            through = ~dd["near"] & (_die_depth(dd, X, U, self.t) > 0)
+            count, away = (self.comm.allreduce(int(x.sum()), op=MPI.SUM) for x in (through, through & dd["away"]))
+            if away:
+                return f"die[{dd['index']}] ({dd['spec'].name}): {away} node(s)", "away"
             if count:
-                return f"die[{dd['index']}] ({dd['spec'].name}): {count} node(s)"
+                return f"die[{dd['index']}] ({dd['spec'].name}): {count} node(s)", "reach"
         terms = {t.name: t for t in self.current}
         for pd in self.pairs:
             if pd["spec"].sliding != "finite":
@@ -702,7 +709,7 @@ class ContactModel:
                 count += int(((found["edge_factor"] == 1.0) & (-found["signed_gap"] > tol)).sum())
             count = self.comm.allreduce(count, op=MPI.SUM)
             if count:
-                return f"contact[{pd['index']}] ({pd['spec'].slave} / {pd['spec'].master}): {count} node(s)"
+                return f"contact[{pd['index']}] ({pd['spec'].slave} / {pd['spec'].master}): {count} node(s)", "reach"
         return None
 
     def prepare(self, t):
@@ -1277,6 +1284,13 @@ def contact_plan(mesh, scene, held=None):
         rows = mesh.comm.allreduce(len(term.rows), op=MPI.SUM)
         lines.append(f"die[{dd['index']}] {spec.name}: rigid plane, {spec.condition}, on {', '.join(spec.surfaces)}; "
                      f"eps_n {dd['eps_n']:.4g} Pa/m; {rows} candidate rows at the first search")
+        # nodes on or past the plane that no row holds: the die would go through them (a normal the wrong way
+        # round, or the die on an edge of a surface that does not face it; hunt31_2)
+        on = _die_depth(dd, mesh.coords, 0.0 * mesh.coords, 0.0) >= -model.scene.solver.active_set_tolerance * dd["h"]
+        away = mesh.comm.allreduce(int((dd["away"] & on & mesh.owned[dd["nodes"]]).sum()), op=MPI.SUM)
+        if away:
+            lines.append(f"warning: die[{dd['index']}] {spec.name}: {away} node(s) of its surfaces lie on or past its "
+                         f"plane with faces turned away from it, and no row: {DIE_AWAY}")
     lines += [f"warning: {line}" for line in model.precision_warnings()]
     model.destroy()
     template.destroy()
