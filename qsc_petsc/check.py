@@ -31,7 +31,8 @@ def check(scene, comm):
     from .restraint import Restraint, describe
     from .solver import free_motion_error
     template = mesh.dof_vector()
-    restraint = Restraint(mesh, dirichlet_dofs(mesh, scene)[0], template)
+    fixed = dirichlet_dofs(mesh, scene)
+    restraint = Restraint(mesh, fixed[0], template)
 
     def held(terms):
         # the run's check before its first solve: every body held by the boundaries and the rows within reach
@@ -39,7 +40,7 @@ def check(scene, comm):
         if free:
             raise free_motion_error(1, free)
     try:
-        plan = contact_plan(mesh, scene, held)
+        plan = contact_plan(mesh, scene, held, fixed)
     finally:
         restraint.destroy()
         template.destroy()

@@ -177,6 +177,9 @@ class Run:
             lattices = lattice.box_lattices(scene)
             self.stiffness_path = "box stencils" if lattices else "element blocks"
             self.bc_dofs, bc_values, self.bc_per_boundary = assembly.dirichlet_dofs(mesh, scene)
+            if self.contact is not None:
+                for line in self.contact.hold_warnings(self.bc_dofs, bc_values, self.bc_per_boundary):
+                    self.log(f"warning: {line}")
             # K arrives as K0 with its lifting: the Dirichlet rows and columns go while its arrays are ours
             fixed = (self.bc_dofs, bc_values)
             K, lifting = (assembly.lattice_stiffness_matrix(mesh, lattices, extra, fixed) if lattices

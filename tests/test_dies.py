@@ -323,6 +323,10 @@ def test_a_sticking_die_holds_a_node_where_it_met_it(tmp_path, monkeypatch, cut)
     _, reference = run_scene(_write(tmp_path, "ref", ref), tmp_path / "ref")
     assert summary["status"] == "ok" and summary["steps"][4]["cutbacks"] == int(cut)
     assert np.abs(_top_force(summary, 3)).max() < 1e-9
+    # the floor carries the block from the start, with no force until the die comes: no contact area till then
+    # (the closed rows' area read 1 m2 at 0 N; hunt31_2)
+    floor = [step["contact"]["die[0] bottom"]["contact_area"] for step in summary["steps"]]
+    assert floor[3] == 0.0 and floor[-1] == pytest.approx(1.0, rel=1e-12), floor
     assert _top_force(summary) == pytest.approx(_top_force(reference), rel=1e-8, abs=1e-8)
     assert _top_force(summary)[0] == pytest.approx(7.702, abs=1e-3)      # 7.002 N a 0.025 m shear (hunt31_2)
 
@@ -360,3 +364,28 @@ def test_a_die_turned_away_from_its_surface_says_so(tmp_path):
     with pytest.raises(ConvergenceError, match=r"die\[1\] \(top\): 25 node\(s\) within the die's reach, of faces "
                                                r"turned away from it, went through it: a die holds only"):
         run_scene(path, tmp_path / "out", ["solver.max_cutbacks=1"])
+
+
+def test_a_sticking_die_dragging_held_nodes_is_said(tmp_path):
+    """A sticking die moving 0.01 m in x across a symmetry plane that holds ux on the nodes it drags: the die's
+    rows fight the hold, and its force, 5e4 N, grows with the penalty; nothing said so (hunt31_2). `qsc check`
+    and the run warn, naming the die, the boundary and the component; the quarter model, whose dies move along its
+    symmetry planes, is not warned."""
+    from conftest import CONFIGS
+
+    from qsc_petsc.assembly import dirichlet_dofs
+    sym = '[[boundary]]\nsurface = "blk.xmin"\ntype = "symmetry"\n' + FLOOR
+    path = _write(tmp_path, "drag", STICK.format(support=sym, top=1.0, motion="[0.01, 0, -0.005]", steps=1))
+
+    def warnings(path):
+        scene = load_scene(path)
+        mesh = distribute_mesh(scene, MPI.COMM_WORLD)
+        return [line for line in contact_plan(mesh, scene, None, dirichlet_dofs(mesh, scene))
+                if line.startswith("warning")]
+    said = ("warning: die[1] top (sticking) moves the nodes on it by 0.01, 0, -0.005 m, but boundary[0] (blk.xmin, "
+            "symmetry) holds 5 of their components (ux) at other values: the die's rows and the hold fight")
+    assert [line[:len(said)] for line in warnings(path)] == [said]
+    logged = []
+    run_scene(path, tmp_path / "out", log=logged.append)
+    assert any(line.startswith(said[len("warning: "):], len("warning: ")) for line in logged), logged
+    assert warnings(CONFIGS / "two_cubes_quarter.toml") == []

@@ -533,6 +533,42 @@ class ContactModel:
         # searched at ("at"), the last residual U - at on the pair's surface nodes ("r") and its relaxation ("w")
         self.settling = {}
 
+    def hold_warnings(self, dofs, values, per_boundary):
+        """Warning lines for each sticking die that moves the nodes on it (touching it at the start) in a component
+        a displacement or symmetry boundary holds at another value (dofs: the owned held dofs, sorted; values at
+        full load; per_boundary: each boundary's, as assembly.dirichlet_dofs gives them): the die's rows and the
+        hold fight, and the die's force grows with its penalty (a sticking die dragged across a symmetry plane:
+        5e4 N, said by nothing; hunt31_2). Collective."""
+        mesh, lines = self.mesh, []
+        for dd in self.dies:
+            spec = dd["spec"]
+            if spec.condition != "sticking":
+                continue
+            v = dd["nodes"]
+            on = _die_depth(dd, mesh.coords, 0.0 * mesh.coords, 0.0) >= -self.scene.solver.active_set_tolerance * dd["h"]
+            v = v[on & mesh.owned[v]]
+            motion = np.asarray(spec.motion, dtype=float)
+            wanted = (3 * mesh.gvert[v][:, None] + np.arange(3)).ravel()
+            at = np.minimum(np.searchsorted(dofs, wanted), max(len(dofs) - 1, 0))
+            # a rank may hold no held dof
+            held, value = ((dofs[at] == wanted, values[at]) if len(dofs) else
+                           (np.zeros(len(wanted), dtype=bool), np.zeros(len(wanted))))
+            move = np.tile(motion, len(v))
+            other = held & (np.abs(value - move) > 1e-12 * np.maximum(np.abs(move), np.abs(value)))
+            clashing = wanted[other]
+            for i, own in enumerate(per_boundary):
+                mine = clashing[np.isin(clashing, own)]
+                count = self.comm.allreduce(len(mine), op=MPI.SUM)
+                if not count:
+                    continue
+                comps = sorted(set().union(*self.comm.allgather({int(c) for c in mine % 3})))
+                bc = self.scene.boundary[i]
+                lines.append(f"die[{dd['index']}] {spec.name} (sticking) moves the nodes on it by "
+                             f"{', '.join(f'{m:g}' for m in motion)} m, but boundary[{i}] ({bc.surface}, {bc.type}) "
+                             f"holds {count} of their components ({', '.join('u' + 'xyz'[c] for c in comps)}) at other "
+                             f"values: the die's rows and the hold fight, and the die's force grows with its penalty")
+        return lines
+
     def precision_warnings(self):
         """A line (in a list; none if all is well) naming the pairs and dies whose element size is within
         1 / COORDINATE_PRECISION of their coordinates' precision, eps |x| (x: the farthest node of the pair's
@@ -1034,8 +1070,11 @@ class ContactModel:
             pressure[v] = (F[_owned_rows(mesh, v)] @ -n) / dd["area"]
             for name, nodes in dd["surfaces"]:       # a die adds to the pressure of the surfaces it presses
                 tractions.setdefault(name, np.zeros(nvl))[nodes] += pressure[nodes]
-            # a node's area once: a sticking die's tangential rows (gated by its normal row) carry it too
-            normal = term.active & (term.gate_of < 0 if term.gate_of is not None else True)
+            # a node's area once: a sticking die's tangential rows (gated by its normal row) carry it too; the area
+            # that carries contact force, as a pair's: a closed row at zero force (a die just touching) read 1 m2
+            # at 0 N (hunt31_2)
+            normal = (term.active & (term.gate_of < 0 if term.gate_of is not None else True)
+                      & (term.m.getArray(readonly=True)[term.rows] > 0))
             summaries[f"die[{dd['index']}] {spec.name}"] = {
                 "rows": self.comm.allreduce(len(term.rows), op=MPI.SUM),
                 "active_rows": self.comm.allreduce(int(term.active.sum()), op=MPI.SUM),
@@ -1254,9 +1293,10 @@ def _term_force(term, u):
     return F
 
 
-def contact_plan(mesh, scene, held=None):
+def contact_plan(mesh, scene, held=None, fixed=None):
     """Lines for `qsc check`: what each contact pair and die will model (the rows of the first increment's search,
-    at u = 0, as a run makes them); held(terms), if given, is called with those terms (the free-motion check)."""
+    at u = 0, as a run makes them); held(terms), if given, is called with those terms (the free-motion check);
+    fixed: assembly.dirichlet_dofs' answer, for the sticking dies' hold warnings."""
     if not (scene.contact or scene.die):
         if held is not None:
             held([])
@@ -1292,6 +1332,8 @@ def contact_plan(mesh, scene, held=None):
             lines.append(f"warning: die[{dd['index']}] {spec.name}: {away} node(s) of its surfaces lie on or past its "
                          f"plane with faces turned away from it, and no row: {DIE_AWAY}")
     lines += [f"warning: {line}" for line in model.precision_warnings()]
+    if fixed is not None:
+        lines += [f"warning: {line}" for line in model.hold_warnings(*fixed)]
     model.destroy()
     template.destroy()
     return lines
