@@ -8,6 +8,7 @@ At solve time the product G^T m (ConstraintTerm.add_force) is the halo exchange 
 multipliers: PETSc scatters row multipliers to the ranks owning the master dofs they act on.
 """
 
+import itertools
 from dataclasses import dataclass
 
 import numpy as np
@@ -496,6 +497,13 @@ SLIP_WARNING = 0.5
 # of a pair's normal force (0.04-0.07 where large sliding settled on configs/sliding_cubes.toml: master nodes past
 # the slave's edge that its rows press; 0.61-1.0 where a 1.2 m slide in two steps had left the lower cube)
 UNFACED_WARNING = 0.5
+# finite sliding is said to overshoot when its slip per step grew at every other step for SLIP_GROWTH_STEPS steps,
+# SLIP_GROWTH times in all, to more than SLIP_GROWTH_FLOOR x h_eff: rows searched at each step's start that
+# overshoot (a tilted block's edge in the dent it presses: 0.0037 -> 0.024 m over steps 41-47 of 64, then 0.43 m a
+# step, the answer 25 % off large sliding's and worse with more steps; 1-2x on configs/ scenes' constant slips)
+SLIP_GROWTH_STEPS = 6
+SLIP_GROWTH = 4.0
+SLIP_GROWTH_FLOOR = 0.05
 # a pair is said to let nodes through when a node that carries no contact force penetrates the other surface by
 # more than UNFORCED_WARNING x h_eff and UNFORCED_RATIO x the deepest pressed node (ContactModel.slip_warnings): a
 # chisel's 60-degree edge under segment or Gauss rows sank the whole stroke with no force (weighted gaps spread it
@@ -520,6 +528,7 @@ class ContactModel:
         self.faced_at_start = {}   # (pair, side): the opposite material point each node faced at u = 0 (report)
         self.faced_last = {}       # (pair, side): the same at the last report
         self.slip_warned = set()
+        self.step_slips = {}           # finite-sliding pairs' max_slip_step, step by step (slip_warnings)
         self.met = set()           # the pairs whose surfaces a search has found within reach (_check_found)
         self.apart = set()         # the pairs last said to have no rows (slip_warnings)
         self.unforced = {}         # per pair: the sides whose nodes its last report found sunk in with no force
@@ -1148,6 +1157,16 @@ class ContactModel:
                              f"({pd['radius']:.3g} m) of the other: the surfaces have come apart (no rows, no force)")
             (self.apart.add if entry["rows"] == 0 else self.apart.discard)(name)
             share, slid = entry["pressed_unfaced_share"], entry["max_slip_step"]
+            slips = self.step_slips.setdefault(name, [])
+            slips.append(slid)
+            if spec.sliding == "finite" and (name, "growth") not in self.slip_warned and _overshooting(
+                    slips, pd["h_eff"]):
+                self.slip_warned.add((name, "growth"))
+                lines.append(f"{name}: its slip per step grew from {slips[-1 - SLIP_GROWTH_STEPS]:.3g} to "
+                             f"{slid:.3g} m over the last {SLIP_GROWTH_STEPS} steps: finite "
+                             f"sliding's rows, searched at each step's start, overshoot here, and its answer drifts "
+                             f"from step to step (more load steps make it worse): use sliding = \"large\", whose "
+                             f"searches settle the rows at each step's answer")
             if spec.sliding == "finite" and (name, "step") not in self.slip_warned and (
                     slid > SLIP_WARNING * pd["h_eff"] or share > UNFACED_WARNING):
                 self.slip_warned.add((name, "step"))
@@ -1209,6 +1228,17 @@ class ContactModel:
         for term in self.current:
             term.destroy()
         self.current = []
+
+
+def _overshooting(slips, h_eff):
+    """Whether a finite-sliding pair's slip per step (slips, step by step) grew at every other step over the last
+    SLIP_GROWTH_STEPS, SLIP_GROWTH times in all, to more than SLIP_GROWTH_FLOOR x h_eff (the overshoot may
+    alternate from step to step)."""
+    if len(slips) <= SLIP_GROWTH_STEPS:
+        return False
+    every_other = slips[-1 - SLIP_GROWTH_STEPS::2]
+    return (slips[-1] > SLIP_GROWTH_FLOOR * h_eff and slips[-1] > SLIP_GROWTH * slips[-1 - SLIP_GROWTH_STEPS]
+            and all(b > a for a, b in itertools.pairwise(every_other)))
 
 
 def _gap_change(last, new, u, floor=0.0):
