@@ -554,7 +554,8 @@ class ContactModel:
             if spec.condition != "sticking":
                 continue
             v = dd["nodes"]
-            on = _die_depth(dd, mesh.coords, 0.0 * mesh.coords, 0.0) >= -self.scene.solver.active_set_tolerance * dd["h"]
+            on = _on_die(dd, _die_depth(dd, mesh.coords, 0.0 * mesh.coords, 0.0),
+                           self.scene.solver.active_set_tolerance)
             v = v[on & mesh.owned[v]]
             motion = np.asarray(spec.motion, dtype=float)
             wanted = (3 * mesh.gvert[v][:, None] + np.arange(3)).ravel()
@@ -696,16 +697,15 @@ class ContactModel:
         n, motion = np.asarray(spec.normal, dtype=float), np.asarray(spec.motion, dtype=float)
         T = row_builders.die_tangents(n)
         state = dd.setdefault("stick", {"t0": 0.0, "held": np.zeros((len(v), 2)), "t": None, "used": None})
+        depth = _die_depth(dd, X, U, t0)
+        touching = _on_die(dd, depth, self.scene.solver.active_set_tolerance)
         if state["t"] is not None and abs(t0 - state["t"]) <= 1e-12 and abs(t0 - state["t0"]) > 1e-12:
             # the last try converged (its state is u): the nodes that touch the die at t0 keep its anchors
-            touching = _die_depth(dd, X, U, t0) > -self.scene.solver.active_set_tolerance * dd["h"]
             state["held"] = np.where(touching[:, None], state["used"], 0.0)
             state["t0"] = t0
         elif abs(t0 - state["t0"]) > 1e-12:
             raise RuntimeError(f"die[{dd['index']}]: an increment from load factor {t0} after tries at "
                                f"{state['t0']} to {state['t']}")
-        depth = _die_depth(dd, X, U, t0)
-        touching = depth > -self.scene.solver.active_set_tolerance * dd["h"]
         approach = (t - t0) * float(motion @ n)
         meet = np.clip(-depth / approach, 0.0, 1.0) if approach > 0 else np.zeros(len(v))
         fresh = (U[v] - (t0 + meet * (t - t0))[:, None] * motion) @ T.T
@@ -718,8 +718,9 @@ class ContactModel:
         reach at the increment's search) and penetrate at u, as ("die[i] (name): n node(s)" or "contact[i]
         (slave / master): n node(s)", cause), or None (collective). The cause is "reach", or "away" for a die's
         nodes within its reach whose faces turn away from it (a normal given the wrong way round, or a surface
-        that does not face the die: its message said to raise the reach, which changed nothing; hunt31_2). A node farther than the search distance at an
-        increment's start went through the die, or into the other surface, unheld (exit 0, no force).
+        that does not face the die: its message said to raise the reach, which changed nothing; hunt31_2). A node
+        farther than the search distance at an increment's start went through the die, or into the other surface,
+        unheld (exit 0, no force).
 
         A pair's nodes are those of the sides that hold rows (the slave's; two_pass: the master's too): one
         without a row that now faces the other surface fully (edge_factor 1: not merely beside its edge) and
@@ -1074,7 +1075,7 @@ class ContactModel:
             v = dd["nodes"]
             h = _die_depth(dd, X, U, self.t)
             penetration[v, 0] = np.maximum(penetration[v, 0], h)
-            status[v, 0] = np.maximum(status[v, 0], (h >= -self.scene.solver.active_set_tolerance * dd["h"]))
+            status[v, 0] = np.maximum(status[v, 0], _on_die(dd, h, self.scene.solver.active_set_tolerance))
             pressure = np.zeros(nvl)
             pressure[v] = (F[_owned_rows(mesh, v)] @ -n) / dd["area"]
             for name, nodes in dd["surfaces"]:       # a die adds to the pressure of the surfaces it presses
@@ -1312,6 +1313,12 @@ def _die_depth(dd, X, U, t):
     return -((X[v] + U[v] - np.asarray(spec.point)) - u_die) @ np.asarray(spec.normal, dtype=float)
 
 
+def _on_die(dd, depth, tolerance):
+    """Which of a die's nodes touch it: their depth past its plane (_die_depth) at least -tolerance x the die's h
+    (solver.active_set_tolerance, as its rows close)."""
+    return depth >= -tolerance * dd["h"]
+
+
 def _term_force(term, u):
     """This term's contact force G^T m at u, as owned (n, 3) rows."""
     term.evaluate(u)
@@ -1356,7 +1363,7 @@ def contact_plan(mesh, scene, held=None, fixed=None):
                      f"eps_n {dd['eps_n']:.4g} Pa/m; {rows} candidate rows at the first search")
         # nodes on or past the plane that no row holds: the die would go through them (a normal the wrong way
         # round, or the die on an edge of a surface that does not face it; hunt31_2)
-        on = _die_depth(dd, mesh.coords, 0.0 * mesh.coords, 0.0) >= -model.scene.solver.active_set_tolerance * dd["h"]
+        on = _on_die(dd, _die_depth(dd, mesh.coords, 0.0 * mesh.coords, 0.0), scene.solver.active_set_tolerance)
         away = mesh.comm.allreduce(int((dd["away"] & on & mesh.owned[dd["nodes"]]).sum()), op=MPI.SUM)
         if away:
             lines.append(f"warning: die[{dd['index']}] {spec.name}: {away} node(s) of its surfaces lie on or past its "
