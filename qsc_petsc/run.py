@@ -305,7 +305,7 @@ class Run:
         scene, system = self.scene, self.system
         n_steps = scene.load.steps
         u = system.u.copy()
-        update = (lambda u, t, t0: self.contact.terms(u, t, t0)) if self.contact else (lambda u, t, t0: [])
+        update = self.contact.terms if self.contact else (lambda u, t, t0, before: [])
         large = [pair for pair in scene.contact if pair.sliding == "large"]
         settle = self.contact.settle if large else None
         max_searches = max((pair.max_searches for pair in large), default=2)
@@ -313,7 +313,7 @@ class Run:
                              if pair.enforcement == "augmented_lagrangian"), default=25)
         # dies and finite-sliding pairs: nodes out of reach at an increment's start that went through (missed)
         guarded = bool(scene.die) or any(pair.sliding == "finite" for pair in scene.contact)
-        before = None         # the converged state before u, (t, Vec), while the predictor extrapolates
+        before = None         # the converged state before u, (t, Vec): the predictor's path, the sticking dies' too
         last_loose = ""       # the last step's loose motions (Restraint.loose), warned when they change
         try:
             for step in range(1, n_steps + 1):
@@ -330,7 +330,7 @@ class Run:
                     if self.contact is not None:
                         cpoint, record["contact"] = self.contact.report(u, ul)
                         point.update(cpoint)
-                        for line in self.contact.slip_warnings(record["contact"]):
+                        for line in self.contact.slip_warnings(record["contact"]) + self.contact.die_warnings():
                             self.log(f"step {step}: warning: {line}")
                         loose = describe(self.restraint.loose(system.terms, system.force_floor))
                         if loose:

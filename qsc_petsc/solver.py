@@ -1112,7 +1112,7 @@ def solve_load_step(system, step, t_prev, t_target, u, update_terms, max_cutback
     (exact for a linear response: the increment needs one Newton step), except the first try of a run and a
     try after a failed one, which start from the converged state; False: always from the converged state.
     before: None, or (t_a, u_a), the converged state before (t_prev, u); the returned before is the state
-    before the returned u (None unless predict), for the next call.
+    before the returned u, for the next call. update_terms(u, t_try, t, before) makes the terms of a try.
     settle (large sliding; ContactModel.settle): after each converged solve, settle(u) searches again at the
     converged u and returns (terms, settled); while not settled the try is solved again from u on those terms,
     and a try whose searches (update_terms' included) reach max_searches unsettled fails (SEARCH_NOT_SETTLED),
@@ -1128,9 +1128,10 @@ def solve_load_step(system, step, t_prev, t_target, u, update_terms, max_cutback
     failed, cause = False, None
     while t < t_target - 1e-14:
         t_try = min(t + dt, t_target)
-        system.set_terms(update_terms(u, t_try, t))
+        system.set_terms(update_terms(u, t_try, t, before))
         _check_held(system, step)
-        path = None if failed else before          # a try after a failed one starts from the converged state
+        # a try after a failed one starts from the converged state, as every try does without the predictor
+        path = None if failed or not predict else before
         start = extrapolate(path, t, u, t_try)
         ok, u_new, stats = _solve_enforced(system, step, t_try, start, augmented_max)
         stats["predictor"] = "previous" if path is None else "extrapolated"
@@ -1161,17 +1162,15 @@ def solve_load_step(system, step, t_prev, t_target, u, update_terms, max_cutback
         stats.update(load_factor=t_try, searches=searches)
         records.append(stats)
         if ok:
-            if not predict:
-                u.destroy()
-            else:
-                if before is not None:
-                    before[1].destroy()
-                before = (t, u)
+            if before is not None:
+                before[1].destroy()
+            before = (t, u)            # the predictor's path, and the sticking dies' (update_terms)
             u, t, failed = u_new, t_try, False
             continue
         u_new.destroy()
         failed = True
-        cutbacks += 1
+        # a die's nodes whose faces turn away from it go through it at any increment: no cutback helps (hunt31_3)
+        cutbacks = max_cutbacks + 1 if stats["snes_reason"] == "OUT_OF_REACH" and cause == "away" else cutbacks + 1
         if log and cutbacks <= max_cutbacks:
             log(f"step {step}: solve at load factor {t_try:.6g} failed "
                 f"({stats['snes_reason']}, KSP {stats['ksp_reason']}); cutting the increment in half")

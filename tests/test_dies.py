@@ -366,26 +366,60 @@ def test_a_die_turned_away_from_its_surface_says_so(tmp_path):
         run_scene(path, tmp_path / "out", ["solver.max_cutbacks=1"])
 
 
-def test_a_sticking_die_dragging_held_nodes_is_said(tmp_path):
+def test_a_die_that_fights_a_boundary_is_said(tmp_path):
     """A sticking die moving 0.01 m in x across a symmetry plane that holds ux on the nodes it drags: the die's
-    rows fight the hold, and its force, 5e4 N, grows with the penalty; nothing said so (hunt31_2). `qsc check`
-    and the run warn, naming the die, the boundary and the component; the quarter model, whose dies move along its
-    symmetry planes, is not warned."""
+    rows fight the hold, and its force, 5e4 N, grows with the penalty; nothing said so (hunt31_2). Nor when the die
+    starts apart and reaches them, or when a frictionless die moves onto a clamped face (hunt31_3). `qsc check` and
+    the run warn, naming the die, the boundary and the component; not the quarter model, whose dies move along its
+    symmetry planes, nor a support that lifts a sticking floor's edge off it (which was warned; hunt31_3)."""
     from conftest import CONFIGS
 
     from qsc_petsc.assembly import dirichlet_dofs
-    sym = '[[boundary]]\nsurface = "blk.xmin"\ntype = "symmetry"\n' + FLOOR
-    path = _write(tmp_path, "drag", STICK.format(support=sym, top=1.0, motion="[0.01, 0, -0.005]", steps=1))
 
     def warnings(path):
         scene = load_scene(path)
         mesh = distribute_mesh(scene, MPI.COMM_WORLD)
         return [line for line in contact_plan(mesh, scene, None, dirichlet_dofs(mesh, scene))
                 if line.startswith("warning")]
-    said = ("warning: die[1] top (sticking) moves the nodes on it by 0.01, 0, -0.005 m, but boundary[0] (blk.xmin, "
-            "symmetry) holds 5 of their components (ux) at other values: the die's rows and the hold fight")
-    assert [line[:len(said)] for line in warnings(path)] == [said]
+    sym = '[[boundary]]\nsurface = "blk.xmin"\ntype = "symmetry"\n' + FLOOR
+    drag = ("warning: die[1] top (sticking, moving 0.01, 0, -0.005 m) sticks to and moves 5 node(s) whose ux "
+            "boundary[0] (blk.xmin, symmetry) holds otherwise: the die's rows and the hold fight")
+    for top in (1.0, 1.004):             # on the block from the start, or reaching it
+        path = _write(tmp_path, f"drag{top}", STICK.format(support=sym, top=top, motion="[0.01, 0, -0.005]",
+                                                            steps=1))
+        assert [line[:len(drag)] for line in warnings(path)] == [drag]
     logged = []
     run_scene(path, tmp_path / "out", log=logged.append)
-    assert any(line.startswith(said[len("warning: "):], len("warning: ")) for line in logged), logged
+    assert any(line.startswith(drag[len("warning: "):], len("warning: ")) for line in logged), logged
+    clamp = ('[[boundary]]\nsurface = "blk.xmin"\ntype = "displacement"\nux = 0.0\nuy = 0.0\nuz = 0.0\n'
+             + FLOOR.replace("sticking", "frictionless"))
+    onto = STICK.format(support=clamp, top=1.0, motion="[0, 0, -0.01]", steps=1).replace(
+        'condition = "sticking"\n[load]', 'condition = "frictionless"\n[load]')
+    said = "warning: die[1] top (frictionless, moving 0, 0, -0.01 m) moves onto 5 node(s) whose uz boundary[0] (blk."
+    assert [line[:len(said)] for line in warnings(_write(tmp_path, "onto", onto))] == [said]
+    lift = ('[[boundary]]\nsurface = "blk.xmin"\ntype = "displacement"\nuz = 0.05\n'
+            '[[boundary]]\nsurface = "blk.zmax"\ntype = "pressure"\nvalue = 1.0\n' + FLOOR)
+    lifted = STICK.format(support=lift, top=1.5, motion="[0, 0, 0]", steps=1)
+    assert warnings(_write(tmp_path, "lift", lifted)) == []
     assert warnings(CONFIGS / "two_cubes_quarter.toml") == []
+
+
+@pytest.mark.parametrize("steps, predictor", [(7, "extrapolate"), (4, "previous")])
+def test_a_body_carried_onto_a_sliding_die_sticks_where_it_meets_it(tmp_path, steps, predictor):
+    """A block lifted 0.1 m by its support onto a sticking die 0.05 m above that only slides 0.05 m sideways: the
+    anchors counted the die's approach alone, so the top stuck where the increment began (Fx 8.0 N at 7 steps,
+    10.1 at 4, 14.0 at 1, against 7.0; hunt31_3). The nodes' own path to the increment's start, extended, finds
+    where they meet the die: the answer of the die that starts on the block and moves the rest of the way, with
+    either predictor. In the first increment no path is known: the log says so."""
+    lift = '[[boundary]]\nsurface = "blk.zmin"\ntype = "displacement"\nux = 0.0\nuy = 0.0\nuz = {uz}'
+    scene = STICK.format(support=lift.format(uz=0.1), top=1.05, motion="[0.05, 0, 0]", steps=steps)
+    _, summary = run_scene(_write(tmp_path, "lift", scene), tmp_path / "lift", [f"solver.predictor={predictor}"])
+    ref = STICK.format(support=lift.format(uz=0.0), top=1.0, motion="[0.025, 0, -0.05]", steps=2)
+    _, reference = run_scene(_write(tmp_path, "ref", ref), tmp_path / "ref")
+    force = np.array(summary["steps"][-1]["contact"]["die[0] top"]["force_on_bodies"])
+    assert force == pytest.approx(np.array(reference["steps"][-1]["contact"]["die[0] top"]["force_on_bodies"]),
+                                  rel=1e-8, abs=1e-8)
+    assert force[0] == pytest.approx(7.002, abs=1e-3)
+    logged = []
+    run_scene(_write(tmp_path, "one", scene), tmp_path / "one", ["load.steps=1"], log=logged.append)
+    assert any("met the sticking die during the first load increment" in line for line in logged), logged

@@ -727,3 +727,5 @@ def test_finite_sliding_says_when_its_slip_per_step_grows(tmp_path):
     assert forces[0] < 0.95 * forces[1], forces
     assert not contact_model._overshooting([1.0, 1.1, 0.9, 1.0, 1.2, 1.0, 1.1, 1.0], 1.0)     # a steady slip
     assert contact_model._overshooting([0.01, 0.02, 0.015, 0.03, 0.02, 0.06, 0.05, 0.09], 1.0)   # alternating growth
+    # a contact that starts sliding within the window: from nothing is no growth (a 30-degree tilt, hunt31_4)
+    assert not contact_model._overshooting([0.0, 0.0199, 0.0198, 0.0209, 0.021, 0.027, 0.0295], 0.1)

@@ -543,40 +543,55 @@ class ContactModel:
         self.settling = {}
 
     def hold_warnings(self, dofs, values, per_boundary):
-        """Warning lines for each sticking die that moves the nodes on it (touching it at the start) in a component
-        a displacement or symmetry boundary holds at another value (dofs: the owned held dofs, sorted; values at
-        full load; per_boundary: each boundary's, as assembly.dirichlet_dofs gives them): the die's rows and the
-        hold fight, and the die's force grows with its penalty (a sticking die dragged across a symmetry plane:
-        5e4 N, said by nothing; hunt31_2). Collective."""
+        """Warning lines for each die whose rows fight a displacement or symmetry boundary (dofs: the owned held
+        dofs, sorted; values at full load; per_boundary: each boundary's, as assembly.dirichlet_dofs gives them),
+        with the motions at full load, the held components of a node moving with their values and its others
+        left still: a die whose motion drives into nodes held along its whole normal (frictionless too), and a
+        sticking die that moves the nodes it touches (at the start, or at the end of its motion) along an axis
+        of its plane that a boundary holds at another value, unless their hold lifts them off it. Either way the
+        die's force grows with its penalty (a sticking die dragged across a symmetry plane: 5e4 N, said by
+        nothing; hunt31_2; a frictionless die onto a clamped face, and a sticking one reaching its nodes later,
+        were not said; a support lifting a floor's edge off a sticking floor was said to fight it: hunt31_3).
+        Collective."""
         mesh, lines = self.mesh, []
+        tol = self.scene.solver.active_set_tolerance
         for dd in self.dies:
             spec = dd["spec"]
-            if spec.condition != "sticking":
-                continue
-            v = dd["nodes"]
-            on = _on_die(dd, _die_depth(dd, mesh.coords, 0.0 * mesh.coords, 0.0),
-                           self.scene.solver.active_set_tolerance)
-            v = v[on & mesh.owned[v]]
-            motion = np.asarray(spec.motion, dtype=float)
-            wanted = (3 * mesh.gvert[v][:, None] + np.arange(3)).ravel()
+            v = dd["nodes"][mesh.owned[dd["nodes"]]]
+            n, motion = np.asarray(spec.normal, dtype=float), np.asarray(spec.motion, dtype=float)
+            wanted = 3 * mesh.gvert[v][:, None] + np.arange(3)
             at = np.minimum(np.searchsorted(dofs, wanted), max(len(dofs) - 1, 0))
             # a rank may hold no held dof
             held, value = ((dofs[at] == wanted, values[at]) if len(dofs) else
-                           (np.zeros(len(wanted), dtype=bool), np.zeros(len(wanted))))
-            move = np.tile(motion, len(v))
-            other = held & (np.abs(value - move) > 1e-12 * np.maximum(np.abs(move), np.abs(value)))
-            clashing = wanted[other]
-            for i, own in enumerate(per_boundary):
-                mine = clashing[np.isin(clashing, own)]
-                count = self.comm.allreduce(len(mine), op=MPI.SUM)
-                if not count:
-                    continue
-                comps = sorted(set().union(*self.comm.allgather({int(c) for c in mine % 3})))
-                bc = self.scene.boundary[i]
-                lines.append(f"die[{dd['index']}] {spec.name} (sticking) moves the nodes on it by "
-                             f"{', '.join(f'{m:g}' for m in motion)} m, but boundary[{i}] ({bc.surface}, {bc.type}) "
-                             f"holds {count} of their components ({', '.join('u' + 'xyz'[c] for c in comps)}) at other "
-                             f"values: the die's rows and the hold fight, and the die's force grows with its penalty")
+                           (np.zeros(wanted.shape, dtype=bool), np.zeros(wanted.shape)))
+            moved = np.where(held, value, 0.0)
+            across = np.abs(n) > 1e-12                       # the components along the die's normal
+            normal_held = held[:, across].all(axis=1)
+            x = mesh.coords[v] - np.asarray(spec.point, dtype=float)
+            start = _on_die(dd, -x @ n, tol)
+            end = -(x + moved - motion) @ n                  # the depth at full load
+            apart = normal_held & ((moved - motion) @ n > 1e-12 * np.abs(motion).max(initial=0.0))
+            push = normal_held & (end > 1e-9 * dd["h"])
+            fights = [("pushes", push[:, None] & across[None, :] & held)]
+            if spec.condition == "sticking":
+                touches = (start | _on_die(dd, end, tol)) & ~apart
+                other = np.abs(value - motion) > 1e-12 * np.maximum(np.abs(motion), np.abs(value))
+                fights.append(("drags", touches[:, None] & ~across[None, :] & held & other))
+            for how, mask in fights:
+                bad = wanted[mask]
+                for i, own in enumerate(per_boundary):
+                    mine = np.isin(bad, own)
+                    count = self.comm.allreduce(len(np.unique(bad[mine] // 3)), op=MPI.SUM)
+                    if not count:
+                        continue
+                    comps = sorted(set().union(*self.comm.allgather({int(c) for c in bad[mine] % 3})))
+                    bc = self.scene.boundary[i]
+                    what = ("moves onto" if how == "pushes" else "sticks to and moves")
+                    lines.append(f"die[{dd['index']}] {spec.name} ({spec.condition}, moving "
+                                 f"{', '.join(f'{m:g}' for m in motion)} m) {what} {count} node(s) whose "
+                                 f"{', '.join('u' + 'xyz'[c] for c in comps)} boundary[{i}] ({bc.surface}, "
+                                 f"{bc.type}) holds otherwise: the die's rows and the hold fight, and the die's force "
+                                 f"grows with its penalty")
         return lines
 
     def precision_warnings(self):
@@ -628,9 +643,10 @@ class ContactModel:
         return ConstraintTerm(name, G, g, W, rows.phi, eps_n, closed, gate, augmented, node_local, alpha,
                               digest=digest)
 
-    def terms(self, u, t, t0=0.0):
+    def terms(self, u, t, t0=0.0, before=None):
         """New search at the current displacement u, the converged state at load factor t0, for the increment to
-        load factor t: one ConstraintTerm per pair and die. A pair
+        load factor t (before: None, or (t_a, u_a), the converged state before u, whose path to u sticking dies
+        extend to find where their nodes meet them): one ConstraintTerm per pair and die. A pair
         with small sliding keeps the term of its first search (its rows and, with the augmented Lagrangian,
         its multipliers); one with finite or large sliding keeps its last term when the new search's rows are
         those rows with gaps within reuse_tolerance of them (_gap_change)."""
@@ -660,6 +676,9 @@ class ContactModel:
             self.searches[name]["count"] = 1
             if pd["spec"].sliding == "large":
                 self.settling[name] = {"at": U, "r": None, "w": 1.0}
+        rate = None          # the nodes' displacement per unit load factor on the path to u (_stick_anchors)
+        if before is not None and t0 > before[0] and any(dd["spec"].condition == "sticking" for dd in self.dies):
+            rate = (U - mesh.local_vectors(before[1])) / (t0 - before[0])
         for dd in self.dies:
             spec = dd["spec"]
             with self._phase("rows"):
@@ -678,21 +697,23 @@ class ContactModel:
                 dd["away"] = within & ~turned       # within reach, of faces turned away (missed, contact_plan)
                 toward = {"face": np.zeros(len(v), dtype=np.int64), "normal": np.tile(n, (len(v), 1))}
                 dd["area"] = facing_areas(mesh, S, X, U, slice(None), toward)[0]
-                anchor = self._stick_anchors(dd, X, U, t, t0)[near] if spec.condition == "sticking" else None
+                anchor = self._stick_anchors(dd, X, U, t, t0, rate)[near] if spec.condition == "sticking" else None
                 rows = row_builders.die_rows(mesh.gvert[v[near]], dd["area"][near], X[v[near]], spec.point, n,
                                              u_die, spec.condition == "sticking", anchor)
                 out.append(self._term(f"die[{dd['index']}]", rows, dd["eps_n"], dd["h"], False, node_local=True))
         self.current = out
         return out
 
-    def _stick_anchors(self, dd, X, U, t, t0):
+    def _stick_anchors(self, dd, X, U, t, t0, rate=None):
         """A sticking die's anchors (die_rows): where on the die, in its tangents, each of its nodes sticks during
         the increment from the converged state U at load factor t0 to t. A node that touched the die at t0 keeps
-        the anchor it was held at; one apart from it sticks where it would meet the die: its place at t0 against
-        the die moved on until the gap d0 it had is closed (the die's approach along n over the increment; at
-        t0 when the die does not approach, the body moving onto it). The anchors measured the slip from the
-        undeformed state: a block that a die reached after moving sideways 0.025 was sheared by the die's whole
-        travel, 2x the force (hunt31_2). A try from the same t0 (after a cutback) starts from the same anchors."""
+        the anchor it was held at; one apart from it sticks where it would meet the die, both going on as they
+        came: the die along its motion, the node at `rate` (its displacement per unit load factor on the path to
+        U, or none), until the gap it had at t0 is closed (at t0 when they do not approach each other). The
+        anchors measured the slip from the undeformed state: a block that a die reached after moving sideways
+        0.025 was sheared by the die's whole travel, 2x the force (hunt31_2); a body lifted onto a die that
+        slides met it where the die's approach alone said (up to 2x again at 1-4 steps; hunt31_3). A try from
+        the same t0 (after a cutback) starts from the same anchors."""
         spec, v = dd["spec"], dd["nodes"]
         n, motion = np.asarray(spec.normal, dtype=float), np.asarray(spec.motion, dtype=float)
         T = row_builders.die_tangents(n)
@@ -706,11 +727,14 @@ class ContactModel:
         elif abs(t0 - state["t0"]) > 1e-12:
             raise RuntimeError(f"die[{dd['index']}]: an increment from load factor {t0} after tries at "
                                f"{state['t0']} to {state['t']}")
-        approach = (t - t0) * float(motion @ n)
-        meet = np.clip(-depth / approach, 0.0, 1.0) if approach > 0 else np.zeros(len(v))
-        fresh = (U[v] - (t0 + meet * (t - t0))[:, None] * motion) @ T.T
+        # each node's relative velocity (per unit load factor) against the die, and its approach over the increment
+        relative = -motion if rate is None else rate[v] - motion
+        approach = -(t - t0) * (relative @ n)
+        meet = np.where(approach > 0, np.clip(-depth / np.where(approach > 0, approach, 1.0), 0.0, 1.0), 0.0)
+        fresh = (U[v] - t0 * motion + (meet * (t - t0))[:, None] * relative) @ T.T
         used = np.where(touching[:, None], state["held"], fresh)
-        state["t"], state["used"] = t, used
+        # the nodes apart when no path was known (the first increment): report() counts those that met the die
+        state["t"], state["used"], state["pathless"] = t, used, ~touching if rate is None else None
         return used
 
     def missed(self, u):
@@ -1075,7 +1099,13 @@ class ContactModel:
             v = dd["nodes"]
             h = _die_depth(dd, X, U, self.t)
             penetration[v, 0] = np.maximum(penetration[v, 0], h)
-            status[v, 0] = np.maximum(status[v, 0], _on_die(dd, h, self.scene.solver.active_set_tolerance))
+            on = _on_die(dd, h, self.scene.solver.active_set_tolerance)
+            status[v, 0] = np.maximum(status[v, 0], on)
+            pathless = dd.get("stick", {}).get("pathless")
+            # pressed in (a node that ends the increment just touching met the die at its end, where it sticks)
+            pressed = h > self.scene.solver.active_set_tolerance * dd["h"]
+            dd["pathless_met"] = self.comm.allreduce(
+                int((pathless & pressed & mesh.owned[v]).sum()) if pathless is not None else 0, op=MPI.SUM)
             pressure = np.zeros(nvl)
             pressure[v] = (F[_owned_rows(mesh, v)] @ -n) / dd["area"]
             for name, nodes in dd["surfaces"]:       # a die adds to the pressure of the surfaces it presses
@@ -1145,6 +1175,23 @@ class ContactModel:
         return (f"; feature_angle = {angle:g} took in their fold ({fold:.0f} degrees), but their faces lean from the "
                 f"other surface by less than that where they meet it")
 
+    def die_warnings(self):
+        """Lines on the sticking dies after a step (report's counts), each once: nodes that met a die during an
+        increment with no earlier state to give their path (_stick_anchors), where they stick is the die's
+        approach alone."""
+        lines = []
+        for dd in self.dies:
+            name = f"die[{dd['index']}] {dd['spec'].name}"
+            if dd.get("pathless_met") and (name, "pathless") not in self.slip_warned:
+                self.slip_warned.add((name, "pathless"))
+                lines.append(f"{name}: {dd['pathless_met']} node(s) met the sticking die during the first load "
+                             f"increment, where no earlier state gives their path: they stick where the die's own "
+                             f"approach says they meet it, which errs by up to the die's sideways travel over the "
+                             f"increment where the body moves onto the die (a body lifted onto a sliding die: twice "
+                             f"the shear force in one step); use more load steps, so that they meet it after the "
+                             f"first")
+        return lines
+
     def slip_warnings(self, summaries):
         """Lines on the pairs' state after a step (report's summaries): a small-sliding pair whose contact slid
         farther than SLIP_WARNING x h_eff (max_slip_*), a pair whose pressed nodes face nothing of the other
@@ -1165,8 +1212,8 @@ class ContactModel:
                 self.slip_warned.add((name, "growth"))
                 lines.append(f"{name}: its slip per step grew from {slips[-1 - SLIP_GROWTH_STEPS]:.3g} to "
                              f"{slid:.3g} m over the last {SLIP_GROWTH_STEPS} steps: finite "
-                             f"sliding's rows, searched at each step's start, overshoot here, and its answer drifts "
-                             f"from step to step (more load steps make it worse): use sliding = \"large\", whose "
+                             f"sliding's rows, searched at each step's start, overshoot here, and its answer may drift "
+                             f"from step to step (more load steps make that worse): use sliding = \"large\", whose "
                              f"searches settle the rows at each step's answer")
             if spec.sliding == "finite" and (name, "step") not in self.slip_warned and (
                     slid > SLIP_WARNING * pd["h_eff"] or share > UNFACED_WARNING):
@@ -1234,11 +1281,12 @@ class ContactModel:
 def _overshooting(slips, h_eff):
     """Whether a finite-sliding pair's slip per step (slips, step by step) grew at every other step over the last
     SLIP_GROWTH_STEPS, SLIP_GROWTH times in all, to more than SLIP_GROWTH_FLOOR x h_eff (the overshoot may
-    alternate from step to step)."""
-    if len(slips) <= SLIP_GROWTH_STEPS:
-        return False
-    every_other = slips[-1 - SLIP_GROWTH_STEPS::2]
-    return (slips[-1] > SLIP_GROWTH_FLOOR * h_eff and slips[-1] > SLIP_GROWTH * slips[-1 - SLIP_GROWTH_STEPS]
+    alternate from step to step), every one of them sliding."""
+    window = slips[-1 - SLIP_GROWTH_STEPS:]
+    if len(window) <= SLIP_GROWTH_STEPS or min(window) <= 0.0:
+        return False          # steps before the contact slid at all are no growth (a 30-degree tilt; hunt31_4)
+    every_other = window[::2]
+    return (slips[-1] > SLIP_GROWTH_FLOOR * h_eff and slips[-1] > SLIP_GROWTH * window[0]
             and all(b > a for a, b in itertools.pairwise(every_other)))
 
 
