@@ -313,6 +313,7 @@ class Run:
                              if pair.enforcement == "augmented_lagrangian"), default=25)
         # dies and finite-sliding pairs: nodes out of reach at an increment's start that went through (missed)
         guarded = bool(scene.die) or any(pair.sliding == "finite" for pair in scene.contact)
+        sticking = any(die.condition == "sticking" for die in scene.die)
         before = None         # the converged state before u, (t, Vec): the predictor's path, the sticking dies' too
         last_loose = ""       # the last step's loose motions (Restraint.loose), warned when they change
         try:
@@ -323,7 +324,8 @@ class Run:
                         system, step, t_prev, t, u, update, scene.solver.max_cutbacks,
                         augmented_max=augmented_max, log=self.log,
                         before=before, predict=scene.solver.predictor == "extrapolate", settle=settle,
-                        max_searches=max_searches, missed=self.contact.missed if guarded else None)
+                        max_searches=max_searches, missed=self.contact.missed if guarded else None,
+                        split=self.contact.pathless_met if sticking else None)
                 with self.phases("output"):
                     point, cell, ul = self.fields(u)
                     record = self._step_record(step, t, stats, u, ul)

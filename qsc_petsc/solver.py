@@ -1105,7 +1105,7 @@ def _solve_enforced(system, step, t, start, augmented_max):
 
 def solve_load_step(system, step, t_prev, t_target, u, update_terms, max_cutbacks,
                     augmented_max=25, log=None, before=None, predict=True, settle=None,
-                    max_searches=20, missed=None):
+                    max_searches=20, missed=None, split=None):
     """Advance from t_prev to t_target, halving the increment on failure; returns (u, stats, before).
 
     predict: each try starts from the linear extrapolation of the last two converged states along the load
@@ -1120,12 +1120,15 @@ def solve_load_step(system, step, t_prev, t_target, u, update_terms, max_cutback
     missed (dies, finite-sliding pairs; ContactModel.missed): after a converged try, the nodes that were out of a
     die's or pair's reach at the increment's start and went through it, or None; a try with some fails
     (OUT_OF_REACH) and is halved.
+    split (sticking dies; ContactModel.pathless_met): after a converged try, how many nodes met a sticking die
+    in it with no earlier state to give their path (the run's first increment); such a try is halved, up to
+    MAX_PATH_SPLITS times, and not counted as a cutback (STICKING_PATH_UNKNOWN in its record).
     A body that the boundary conditions and every contact row within reach leave free is a scene
     error (System.free_motions); a failed solve names what its iterates left free."""
     dt = t_target - t_prev
     t = t_prev
     cutbacks, records = 0, []
-    failed, cause = False, None
+    failed, cause, splits = False, None, 0
     while t < t_target - 1e-14:
         t_try = min(t + dt, t_target)
         system.set_terms(update_terms(u, t_try, t, before))
@@ -1159,6 +1162,10 @@ def solve_load_step(system, step, t_prev, t_target, u, update_terms, max_cutback
             if through:
                 ok = False
                 stats["snes_reason"], (stats["out_of_reach"], cause) = "OUT_OF_REACH", through
+        met = split(u_new) if ok and split is not None and splits < MAX_PATH_SPLITS else 0
+        if met:
+            ok = False
+            stats["snes_reason"] = "STICKING_PATH_UNKNOWN"
         stats.update(load_factor=t_try, searches=searches)
         records.append(stats)
         if ok:
@@ -1169,6 +1176,14 @@ def solve_load_step(system, step, t_prev, t_target, u, update_terms, max_cutback
             continue
         u_new.destroy()
         failed = True
+        if met:
+            # no failure: the try is halved until the nodes meet the die in an increment with a known path
+            splits += 1
+            if log:
+                log(f"step {step}: {met} node(s) met a sticking die in the increment to load factor {t_try:.6g}, "
+                    f"where no earlier state gives their path: halving it, so that they meet it in one that does")
+            dt *= 0.5
+            continue
         # a die's nodes whose faces turn away from it go through it at any increment: no cutback helps (hunt31_3)
         cutbacks = max_cutbacks + 1 if stats["snes_reason"] == "OUT_OF_REACH" and cause == "away" else cutbacks + 1
         if log and cutbacks <= max_cutbacks:
@@ -1219,6 +1234,10 @@ def solve_load_step(system, step, t_prev, t_target, u, update_terms, max_cutback
 
 DIE_AWAY = ("a die holds only the nodes of faces turned towards it; check the sign of its normal (from the die "
             "toward the bodies), or list the surfaces that face it")
+# the run's first increment is halved up to this many times while nodes meet a sticking die in it, whose path to
+# the die no earlier state gives (solve_load_step's split): a block lifted onto a sliding die in 2 steps met it at
+# the first step's end with the anchor of the die's start, 2x the shear force (hunt31_5)
+MAX_PATH_SPLITS = 6
 EXACT_PCS = ("lu", "cholesky", "qr", "svd", "redundant", "telescope", "fieldsplit", "composite", "ksp", "shell")
 
 

@@ -401,6 +401,17 @@ def test_a_die_that_fights_a_boundary_is_said(tmp_path):
             '[[boundary]]\nsurface = "blk.zmax"\ntype = "pressure"\nvalue = 1.0\n' + FLOOR)
     lifted = STICK.format(support=lift, top=1.5, motion="[0, 0, 0]", steps=1)
     assert warnings(_write(tmp_path, "lift", lifted)) == []
+    # a sticking die that moves off the block at once (was warned), and an inclined one dragging held nodes
+    # along its plane (was not; hunt31_5)
+    off = STICK.format(support=sym, top=1.0, motion="[0.01, 0, 0.01]", steps=1)
+    assert warnings(_write(tmp_path, "off", off)) == []
+    side = '[[boundary]]\nsurface = "blk.xmax"\ntype = "symmetry"\n' + FLOOR
+    slope = STICK.format(support=side, top=1.0, motion="[-0.01, 0, -0.01]", steps=1).replace(
+        "normal = [0, 0, -1]", "normal = [-0.5, 0, -0.8660254037844386]").replace(
+        "point = [0, 0, 1.0]", "point = [1, 0, 1]")
+    said = ("warning: die[1] top (sticking, moving -0.01, 0, -0.01 m) sticks to and moves 5 node(s) whose ux "
+            "boundary[0] (blk.xmax, symmetry)")
+    assert [line[:len(said)] for line in warnings(_write(tmp_path, "slope", slope))] == [said]
     assert warnings(CONFIGS / "two_cubes_quarter.toml") == []
 
 
@@ -410,7 +421,8 @@ def test_a_body_carried_onto_a_sliding_die_sticks_where_it_meets_it(tmp_path, st
     anchors counted the die's approach alone, so the top stuck where the increment began (Fx 8.0 N at 7 steps,
     10.1 at 4, 14.0 at 1, against 7.0; hunt31_3). The nodes' own path to the increment's start, extended, finds
     where they meet the die: the answer of the die that starts on the block and moves the rest of the way, with
-    either predictor. In the first increment no path is known: the log says so."""
+    either predictor. In the first increment no path is known: a try in which nodes meet the die is halved until
+    they meet it in one with a path (at 1 and 2 steps 14.0 N, no word; hunt31_5)."""
     lift = '[[boundary]]\nsurface = "blk.zmin"\ntype = "displacement"\nux = 0.0\nuy = 0.0\nuz = {uz}'
     scene = STICK.format(support=lift.format(uz=0.1), top=1.05, motion="[0.05, 0, 0]", steps=steps)
     _, summary = run_scene(_write(tmp_path, "lift", scene), tmp_path / "lift", [f"solver.predictor={predictor}"])
@@ -420,6 +432,13 @@ def test_a_body_carried_onto_a_sliding_die_sticks_where_it_meets_it(tmp_path, st
     assert force == pytest.approx(np.array(reference["steps"][-1]["contact"]["die[0] top"]["force_on_bodies"]),
                                   rel=1e-8, abs=1e-8)
     assert force[0] == pytest.approx(7.002, abs=1e-3)
-    logged = []
-    run_scene(_write(tmp_path, "one", scene), tmp_path / "one", ["load.steps=1"], log=logged.append)
-    assert any("met the sticking die during the first load increment" in line for line in logged), logged
+    for few in (1, 2):
+        logged = []
+        _, first = run_scene(_write(tmp_path, "one", scene), tmp_path / f"few{few}", [f"load.steps={few}"],
+                             log=logged.append)
+        assert first["steps"][-1]["contact"]["die[0] top"]["force_on_bodies"] == pytest.approx(
+            list(force), rel=1e-8, abs=1e-8)
+        assert any("met a sticking die in the increment to load factor" in line and "halving it" in line
+                   for line in logged), logged
+        assert "STICKING_PATH_UNKNOWN" in [solve["snes_reason"] for solve in first["steps"][0]["solves"]]
+        assert first["steps"][0]["cutbacks"] == 0
