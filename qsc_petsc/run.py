@@ -332,7 +332,7 @@ class Run:
                     if self.contact is not None:
                         cpoint, record["contact"] = self.contact.report(u, ul)
                         point.update(cpoint)
-                        for line in self.contact.slip_warnings(record["contact"]) + self.contact.die_warnings():
+                        for line in self.contact.slip_warnings(record["contact"]):
                             self.log(f"step {step}: warning: {line}")
                         loose = describe(self.restraint.loose(system.terms, system.force_floor))
                         if loose:

@@ -1127,6 +1127,7 @@ def solve_load_step(system, step, t_prev, t_target, u, update_terms, max_cutback
     error (System.free_motions); a failed solve names what its iterates left free."""
     dt = t_target - t_prev
     t = t_prev
+    resume = None         # the increment before the first halving for a sticking die's unknown path
     cutbacks, records = 0, []
     failed, cause, splits = False, None, 0
     while t < t_target - 1e-14:
@@ -1162,10 +1163,17 @@ def solve_load_step(system, step, t_prev, t_target, u, update_terms, max_cutback
             if through:
                 ok = False
                 stats["snes_reason"], (stats["out_of_reach"], cause) = "OUT_OF_REACH", through
-        met = split(u_new) if ok and split is not None and splits < MAX_PATH_SPLITS else 0
-        if met:
+        met = split(u_new) if ok and split is not None else 0
+        if met and splits < MAX_PATH_SPLITS:
             ok = False
             stats["snes_reason"] = "STICKING_PATH_UNKNOWN"
+        elif met:
+            stats["met_without_path"] = met
+            if log:
+                log(f"step {step}: warning: {met} node(s) met a sticking die within the first 1/{2 ** splits} of "
+                    f"the run's first increment, where no earlier state gives their path: they stick where the "
+                    f"die's own approach places them, which errs by up to their own travel along the die before "
+                    f"they meet it (a body lifted onto a sliding die in one step: twice the shear force)")
         stats.update(load_factor=t_try, searches=searches)
         records.append(stats)
         if ok:
@@ -1173,11 +1181,14 @@ def solve_load_step(system, step, t_prev, t_target, u, update_terms, max_cutback
                 before[1].destroy()
             before = (t, u)            # the predictor's path, and the sticking dies' (update_terms)
             u, t, failed = u_new, t_try, False
+            if resume is not None and not met:
+                dt, resume = resume, None     # the path is known now: the halvings for it end (70 solves in 1 step)
             continue
         u_new.destroy()
         failed = True
         if met:
             # no failure: the try is halved until the nodes meet the die in an increment with a known path
+            resume = dt if resume is None else resume
             splits += 1
             if log:
                 log(f"step {step}: {met} node(s) met a sticking die in the increment to load factor {t_try:.6g}, "

@@ -18,7 +18,7 @@ from petsc4py import PETSc
 from .. import assembly, fem
 from ..errors import SceneError
 from ..mesh import on_all
-from ..solver import DIE_AWAY, FLOOR_STRAIN, MAX_PATH_SPLITS, ConstraintTerm, array_digest
+from ..solver import DIE_AWAY, FLOOR_STRAIN, ConstraintTerm, array_digest
 from . import quadrature
 from . import rows as row_builders
 from .geometry import _dot
@@ -548,8 +548,8 @@ class ContactModel:
         with the motions at full load, the held components of a node moving with their values and its others
         left still: a die whose motion drives into nodes held along its whole normal (frictionless too), and a
         sticking die that moves the nodes it touches (at the start, or at the end of its motion) in a component
-        that a boundary holds at another value, unless they part (the die moving off them, or the hold lifting
-        them off it; an inclined die's drag and a die moving off were misjudged: hunt31_5). Either way the
+        that a boundary holds at another value, unless their hold lifts them off it (an inclined die's drag was
+        missed: hunt31_5). Either way the
         die's force grows with its penalty (a sticking die dragged across a symmetry plane: 5e4 N, said by
         nothing; hunt31_2; a frictionless die onto a clamped face, and a sticking one reaching its nodes later,
         were not said; a support lifting a floor's edge off a sticking floor was said to fight it: hunt31_3).
@@ -571,8 +571,10 @@ class ContactModel:
             x = mesh.coords[v] - np.asarray(spec.point, dtype=float)
             start = _on_die(dd, -x @ n, tol)
             end = -(x + moved - motion) @ n                  # the depth at full load
-            # the node and the die part (its free components taken still: a die moving off it, or a hold lifting it)
-            apart = (moved - motion) @ n > 1e-12 * max(np.abs(motion).max(initial=0.0), np.abs(moved).max(initial=0.0))
+            # the hold lifts the node off the die (or the die moves off a node held along its normal; a node free
+            # along it may follow the die, pressed by the body: such a die was taken to move off; hunt31_6)
+            apart = normal_held & ((moved - motion) @ n > 1e-12 * max(np.abs(motion).max(initial=0.0),
+                                                                       np.abs(moved).max(initial=0.0)))
             push = normal_held & (end > 1e-9 * dd["h"])
             pushing = push[:, None] & across[None, :] & held
             fights = [("pushes", pushing)]
@@ -1105,9 +1107,6 @@ class ContactModel:
             penetration[v, 0] = np.maximum(penetration[v, 0], h)
             on = _on_die(dd, h, self.scene.solver.active_set_tolerance)
             status[v, 0] = np.maximum(status[v, 0], on)
-            pathless = dd.get("stick", {}).get("pathless")
-            dd["pathless_met"] = self.comm.allreduce(
-                int((pathless & on & mesh.owned[v]).sum()) if pathless is not None else 0, op=MPI.SUM)
             pressure = np.zeros(nvl)
             pressure[v] = (F[_owned_rows(mesh, v)] @ -n) / dd["area"]
             for name, nodes in dd["surfaces"]:       # a die adds to the pressure of the surfaces it presses
@@ -1191,22 +1190,6 @@ class ContactModel:
                 on = _on_die(dd, _die_depth(dd, X, U, self.t), self.scene.solver.active_set_tolerance)
                 count += int((pathless & on & self.mesh.owned[dd["nodes"]]).sum())
         return self.comm.allreduce(count, op=MPI.SUM)
-
-    def die_warnings(self):
-        """Lines on the sticking dies after a step (report's counts), each once: nodes that met a die during an
-        increment with no earlier state to give their path (_stick_anchors), where they stick is the die's
-        approach alone."""
-        lines = []
-        for dd in self.dies:
-            name = f"die[{dd['index']}] {dd['spec'].name}"
-            if dd.get("pathless_met") and (name, "pathless") not in self.slip_warned:
-                self.slip_warned.add((name, "pathless"))
-                lines.append(f"{name}: {dd['pathless_met']} node(s) met the sticking die within the first "
-                             f"1/{2 ** MAX_PATH_SPLITS} of the first load increment, where no earlier state gives "
-                             f"their path: they stick where the die's own approach says they meet it, which errs by "
-                             f"up to their own travel along the die before they meet it (a body lifted onto a "
-                             f"sliding die: twice the shear force in one step)")
-        return lines
 
     def slip_warnings(self, summaries):
         """Lines on the pairs' state after a step (report's summaries): a small-sliding pair whose contact slid
