@@ -293,12 +293,13 @@ class BandComposite:
     current J's, as the composite's was; the slip correction's J Z stays the setup's. `soften(P)`, if given, is
     a context in which P is the operator BoomerAMG is to be set up on (System.softened)."""
 
-    def __init__(self, inner, band, parts, slip=None, soften=None, symmetric=False):
+    def __init__(self, inner, band, parts, slip=None, soften=None, symmetric=False, defaults=None):
         self.inner, self.band, self.parts = inner, band, parts
         self.slip, self.soften, self.symmetric = slip, soften, symmetric
+        # {option: value} qsc put in the database for the multigrid's setup alone (petsc_options.txt says them)
+        self.defaults = defaults or {}
         self.ready = False
         self.columns = self.band_rows = self.jy = self.work = None
-        self.defaults = {}      # {option: value} qsc put in the database for the multigrid's setup alone
 
     def setUp(self, pc):
         _, P = pc.getOperators()
@@ -411,9 +412,8 @@ def install_band_pc(ksp, band, comm, coarse=None, soften=None):
     pc = PETSc.PC().create(comm=comm)
     pc.setOptionsPrefix("qsc_")
     pc.setType("python")
-    composite = BandComposite(amg, BandSolve(band, comm), parts, slip, soften, symmetric=krylov == "cg")
-    composite.defaults = added           # what petsc_options.txt says the multigrid read from qsc
-    pc.setPythonContext(composite)
+    pc.setPythonContext(BandComposite(amg, BandSolve(band, comm), parts, slip, soften, symmetric=krylov == "cg",
+                                      defaults=added))
     ksp.setPC(pc)
     return n_band, parts
 

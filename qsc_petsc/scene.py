@@ -555,8 +555,8 @@ DIE = Table({
     "motion": Vec3(Float(), "Die displacement reached at the last load step, ramped linearly.", default=[0, 0, 0],
                    unit="m"),
     "surfaces": ListOf(SurfaceRef(), "Body surfaces the die can touch.", min_len=1),
-    "condition": Choice(("frictionless", "sticking"), "Tangential condition on the die face; sticking holds each node where it met the die.",
-                        default="frictionless"),
+    "condition": Choice(("frictionless", "sticking"), "Tangential condition on the die face; sticking holds each "
+                        "node where it met the die.", default="frictionless"),
     "penalty": Float("Dimensionless alpha of the penalty eps_n = alpha * E / h (h: the mean size of the faces turned "
                      "towards the die; at most 1e10).", gt=0,
                      le=MAX_PENALTY, default=1e4),

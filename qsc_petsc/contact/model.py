@@ -548,17 +548,17 @@ class ContactModel:
         with the motions at full load, the held components of a node moving with their values and its others
         left still: a die whose motion drives into nodes held along its whole normal (frictionless too), and a
         sticking die that moves the nodes it touches (at the start, or at the end of its motion) in a component
-        that a boundary holds at another value, unless their hold lifts them off it (an inclined die's drag was
-        missed: hunt31_5). Either way the
-        die's force grows with its penalty (a sticking die dragged across a symmetry plane: 5e4 N, said by
-        nothing; hunt31_2; a frictionless die onto a clamped face, and a sticking one reaching its nodes later,
-        were not said; a support lifting a floor's edge off a sticking floor was said to fight it: hunt31_3).
-        Collective."""
+        that a boundary holds at another value, unless their hold lifts them off it. Either way the die's force
+        grows with its penalty (a sticking die dragged across a symmetry plane: 5e4 N, said by nothing; hunt31_2;
+        a frictionless die onto a clamped face, and a sticking one reaching its nodes later, were not said; a
+        support lifting a floor's edge off a sticking floor was said to fight it: hunt31_3; an inclined die's drag
+        was missed: hunt31_5). Collective."""
         mesh, lines = self.mesh, []
         tol = self.scene.solver.active_set_tolerance
         for dd in self.dies:
             spec = dd["spec"]
-            v = dd["nodes"][mesh.owned[dd["nodes"]]]
+            own = mesh.owned[dd["nodes"]]
+            v = dd["nodes"][own]
             n, motion = np.asarray(spec.normal, dtype=float), np.asarray(spec.motion, dtype=float)
             wanted = 3 * mesh.gvert[v][:, None] + np.arange(3)
             at = np.minimum(np.searchsorted(dofs, wanted), max(len(dofs) - 1, 0))
@@ -568,9 +568,10 @@ class ContactModel:
             moved = np.where(held, value, 0.0)
             across = np.abs(n) > 1e-12                       # the components along the die's normal
             normal_held = held[:, across].all(axis=1)
-            x = mesh.coords[v] - np.asarray(spec.point, dtype=float)
-            start = _on_die(dd, -x @ n, tol)
-            end = -(x + moved - motion) @ n                  # the depth at full load
+            U = np.zeros_like(mesh.coords)
+            start = _on_die(dd, _die_depth(dd, mesh.coords, U, 0.0)[own], tol)
+            U[v] = moved
+            end = _die_depth(dd, mesh.coords, U, 1.0)[own]   # the depth at full load
             # the hold lifts the node off the die (or the die moves off a node held along its normal; a node free
             # along it may follow the die, pressed by the body: such a die was taken to move off; hunt31_6)
             apart = normal_held & ((moved - motion) @ n > 1e-12 * max(np.abs(motion).max(initial=0.0),
@@ -739,7 +740,7 @@ class ContactModel:
         meet = np.where(approach > 0, np.clip(-depth / np.where(approach > 0, approach, 1.0), 0.0, 1.0), 0.0)
         fresh = (U[v] - t0 * motion + (meet * (t - t0))[:, None] * relative) @ T.T
         used = np.where(touching[:, None], state["held"], fresh)
-        # the nodes apart when no path was known (the first increment): report() counts those that met the die
+        # the nodes apart when no path was known (the run's first increment): pathless_met counts those that met it
         state["t"], state["used"], state["pathless"] = t, used, ~touching if rate is None else None
         return used
 

@@ -398,7 +398,7 @@ def die_rows(node, area, xyz, point, normal, u_die, sticking=False, anchor=None)
     gate_rows, gate_of = _ints(), _ints()
     if sticking:
         anchor = np.zeros((p, 2)) if anchor is None else np.asarray(anchor, dtype=float).reshape(p, 2)
-        for i, (slot, t) in enumerate(zip((1, 2), _tangent_basis(n))):
+        for i, (slot, t) in enumerate(zip((1, 2), die_tangents(n))):
             parts.append(row_block(slot, np.broadcast_to(t, (p, 3)), u_die @ t + anchor[:, i]))
         gate_rows = np.concatenate([row + 1, row + 2])
         gate_of = np.concatenate([row, row])
