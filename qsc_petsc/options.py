@@ -107,6 +107,27 @@ def more_mumps_workspace(pc, prefix, own):
     return relax
 
 
+def reset_failed_mumps(pc):
+    """pc reset when its last MUMPS factorization failed (INFOG(1) < 0; -10: a numerically singular matrix), so
+    that its next setup makes new factors: PETSc skips the numeric factorization of a failed MUMPS factor, and the
+    next solve called MUMPS with none (INFOG(1) = -3, PETSc error 76). A body pulled off the contact that held it,
+    on 2 ranks: that error ended the run instead of the cutbacks and their diagnostic, on a machine where MUMPS's
+    parallel pivoting met the singular iterate's null pivot. Returns whether it reset pc. Collective."""
+    from petsc4py import PETSc
+    if not factored_by_mumps(pc):
+        return False
+    try:
+        F = pc.getFactorMatrix()
+    except PETSc.Error as exc:         # no factor yet (a try that failed before its first linear solve)
+        if exc.ierr == 58:
+            return False
+        raise
+    if F.getMumpsInfog(1) >= 0:
+        return False
+    pc.reset()
+    return True
+
+
 def option_value(key, default=None):
     """The value of option qsc_<key> in the database (command line, scene, code), or default when it is unset."""
     from petsc4py import PETSc

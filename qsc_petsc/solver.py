@@ -42,8 +42,11 @@ AUGMENTED_ROUND_OFF = 10.0
 # set it, not another body's (hunt30_4: a free body moved 1e12 m set the first bound at 1.2 and the loop stopped
 # at the penalty's answer, 9.4 % off)
 AUGMENTED_ROUND_OFF_CAP = 1e-3
-# the augmented Lagrangian: rows whose area W is below this fraction of the term's largest keep no multiplier
-AUGMENTED_SLIVER = 1e-3
+# the augmented Lagrangian: rows whose stiffness on their own node, against the elements' there, is below this
+# fraction of the term's largest keep no multiplier (ConstraintTerm.own_stiffness). Slivers of area past an edge
+# stand at 5e-7-5e-6 of the largest, every other row of the sliding cubes at 9e-4 or more (1e-2 or more but in
+# one increment; a row of a mesh 10x finer than the pair's coarser side at ~0.1)
+AUGMENTED_SLIVER = 1e-4
 KSP_MAX_IT = 2000              # Krylov iterations per linear solve unless -qsc_ksp_max_it says otherwise
 # SNES types that take Newton steps with the Jacobian and stop by System._converged (the active set and the force
 # residual): the others stop by tests of their own (ksponly after one linear solve, ngmres on a step norm it never
@@ -107,6 +110,7 @@ class ConstraintTerm:
         # product's numeric part (System._jacobian)
         self.DG = self.product = None
         self.G_abs = None        # |G|, for the augmented Lagrangian's round-off (_row_scale)
+        self.own = None          # the rows' stiffness on their own nodes (own_stiffness)
         # the d the product holds (None once it is changed in place); its pattern (G^T G's) and the pattern's digest
         self.product_d = self.pattern = self.pattern_digest = None
         w = W.getArray()
@@ -222,20 +226,48 @@ class ConstraintTerm:
             if mat is not None:
                 mat.destroy()
 
-    def next_multipliers(self, u):
+    def own_stiffness(self, stiffness):
+        """Per existing row, its penalty's stiffness on the node it belongs to (row 3 k: node k) against the
+        elements' there: |G_k|^2 / (W k_n), G_k the row's entries on node k's dofs (W a n, a the mean of node k's
+        shape function over the row's points, weighted by it) and k_n the diagonal of K along G_k over the node's
+        free dofs (stiffness: K's diagonal on this rank's dofs, NaN on fixed ones); NaN where the node is held all
+        along G_k, 0 without entries on it. Uzawa moves a row's gap by its own node: a row whose node barely moves
+        its gap (a sliver past an edge: a ~ 0.02 against 0.44) or whose area is a sliver converges by a fixed step
+        an update. Kept per term (G does not change)."""
+        if self.own is None:
+            ia, ja, a = self.G.getValuesCSR()
+            row = np.repeat(np.arange(len(ia) - 1), np.diff(ia))
+            mine = ja // 3 == (row + self.G.getOwnershipRange()[0]) // 3
+            Gk = np.zeros((len(ia) - 1, 3))
+            Gk[row[mine], ja[mine] % 3] = a[mine]
+            n2 = Gk[self.rows] ** 2
+            k = np.asarray(stiffness).reshape(-1, 3)[self.rows // 3]     # G's rows are laid out as the dofs
+            free = np.where(np.isnan(k), 0.0, n2)
+            size, free_size = n2.sum(axis=1), free.sum(axis=1)
+            k_n = np.divide((free * np.nan_to_num(k)).sum(axis=1), free_size, out=np.full(len(k), np.nan),
+                            where=free_size > 1e-12 * size)
+            self.own = np.divide(size, self.W.getArray()[self.rows] * k_n, out=np.zeros(len(k)), where=size > 0)
+        return self.own
+
+    def next_multipliers(self, u, stiffness):
         """The augmented Lagrangian's Uzawa step from the last evaluate, at u, not applied: (new multipliers, their
         relative change, the change's round-off bound, AUGMENTED_ROUND_OFF) (collective). Left unapplied once every
         term has settled, the answer keeps the multipliers it was solved with, so that its contact forces balance
-        the bodies' (an applied update would add its change to the forces reported at the same displacement)."""
+        the bodies' (an applied update would add its change to the forces reported at the same displacement).
+        stiffness: System.dof_stiffness()."""
         c = self.c.getArray()[self.rows]
         W = self.W.getArray()[self.rows]
         new = multipliers_update(self.lmbda, c, W, self.eps_n, self.gate_of)
         comm = self.G.getComm().tompi4py()
-        # a row of a sliver of area stays a penalty row (no multiplier): its penalty is too weak against the
-        # elements around it for Uzawa, whose multiplier then grew by the same step at every update (the sliding
-        # cubes at load factor 0.375, a slave node 1 mm past the other cube's edge: W 3.8e-5 of the largest, 1200
-        # Pa an update, the pair's loop stopped after 25 with its change at 2 %)
-        sliver = W < AUGMENTED_SLIVER * comm.allreduce(float(W.max(initial=0.0)), op=MPI.MAX)
+        # a row whose own stiffness is a sliver of the others' stays a penalty row (no multiplier): Uzawa's step
+        # barely moves its gap, and its multiplier grew by the same step at every update. A slave node 1 mm past
+        # the other cube's edge (W 3.8e-5 of the largest: 1200 Pa an update, 2 % change after 25 updates); slave
+        # nodes 0.05 element past it (W 1.6e-3 of the largest, a ~ 0.024): 43 Pa an update to 1100 Pa, 100x the
+        # contact's pressure, and the sliding cubes at alpha 1e2 stopped in 4-64 load steps; at alpha 1e4 they
+        # converged holding 5500 Pa (hunt31_4)
+        own = self.own_stiffness(stiffness)
+        top = comm.allreduce(float(np.nanmax(own, initial=0.0)), op=MPI.MAX)
+        sliver = np.nan_to_num(own, nan=np.inf) < AUGMENTED_SLIVER * top
         new[sliver] = 0.0
         # the rows' round-off, eps (|G| |u| + |g|) in C, is eps_n eps (|G| |u| + |g|) / W in a multiplier: on the
         # rows that hold one, the floor of the updates' change (AUGMENTED_ROUND_OFF)
@@ -336,6 +368,7 @@ class System:
         # which outweighed every force in a soft or small body (E = 1e-12 Pa, or a box 1e-20 m wide, driven by a
         # prescribed displacement: "converged" at once with every free node at rest)
         self.bc_local = (bc_dofs - self.u.getOwnershipRange()[0]).astype(np.int64)
+        self.stiffness = None        # K's diagonal, NaN on fixed dofs (dof_stiffness)
         self.free_local = np.ones(self.u.getLocalSize(), dtype=bool)
         self.free_local[self.bc_local] = False
         self.b_norm = self._free_norm(self.b)
@@ -439,6 +472,16 @@ class System:
             return None
         return (max(int(MUMPS_MEMORY_SHARE * share / 1e6), 1),
                 f"{MUMPS_MEMORY_SHARE:.0%} of a rank's share of its node's available memory")
+
+    def dof_stiffness(self):
+        """K's diagonal on this rank's dofs, NaN on the fixed ones (whose rows hold 1): the elements' stiffness at
+        each free dof (ConstraintTerm.own_stiffness). Kept: K does not change."""
+        if self.stiffness is None:
+            diagonal = self.K.getDiagonal()
+            self.stiffness = diagonal.getArray().copy()
+            diagonal.destroy()
+            self.stiffness[self.bc_local] = np.nan
+        return self.stiffness
 
     def _factors_with_mumps(self):
         """Whether the solver's PC is a MUMPS factorization (options.factored_by_mumps)."""
@@ -877,6 +920,9 @@ class System:
             if self.snes.getConvergedReason() > 0 or not self._more_mumps_workspace():
                 break
             u.destroy()
+        if self.snes.getConvergedReason() <= 0:
+            # a try that met a singular matrix (an iterate that left a body free): the next one makes new factors
+            options.reset_failed_mumps(self.snes.getKSP().getPC())
         # held dofs stay at their values up to the Krylov tolerance: put them back exactly
         u.getArray()[self.bc_local] = t * self.ubar.getArray()[self.bc_local]
         reason = self.snes.getConvergedReason()
@@ -1080,7 +1126,7 @@ def _solve_enforced(system, step, t, start, augmented_max):
     stats["multipliers_at_round_off"] = None
     outer = 0
     while ok and augmented:
-        steps = [(term, *term.next_multipliers(u_new)) for term in augmented]
+        steps = [(term, *term.next_multipliers(u_new, system.dof_stiffness())) for term in augmented]
         outer += 1
         if all(change <= max(term.augmented_tolerance, bound) for term, _, change, bound in steps):
             # a tolerance under the multipliers' round-off is met at that round-off, and said (Run)

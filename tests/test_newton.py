@@ -442,3 +442,42 @@ def test_the_force_floor_is_the_softest_bodys(tmp_path):
         assert summary["status"] == "ok"
         forces.append(summary["steps"][-1]["contact"]["die[1] top"]["force_on_bodies"][2])
     assert forces[0] == pytest.approx(forces[1], rel=1e-9)
+
+
+def test_a_failed_mumps_factor_is_made_anew():
+    """PETSc skips the numeric factorization of a MUMPS factor whose last factorization failed, so the next solve
+    called MUMPS with no factors (PETSc error 76, INFOG(1) = -3): a body pulled off the contact that held it ended
+    its 2-rank run on that error instead of its cutbacks on a machine where MUMPS met the singular iterate's null
+    pivot. options.reset_failed_mumps (System.solve_at, after a failed try) makes the next setup factor anew."""
+    from qsc_petsc import options
+
+    def solve(values, reset):
+        A.setValues(range(3), range(3), values)
+        A.assemble()
+        if reset:
+            options.reset_failed_mumps(pc)       # as solve_at after a failed try: SNES then sets the operators
+        ksp.setOperators(A)
+        ksp.solve(b, x)
+        return ksp.getConvergedReason()
+
+    for reset in (False, True):
+        A = PETSc.Mat().createAIJ((3, 3), nnz=3, comm=PETSc.COMM_SELF)
+        ksp = PETSc.KSP().create(comm=PETSc.COMM_SELF)
+        ksp.setType("preonly")
+        pc = ksp.getPC()
+        pc.setType("lu")
+        pc.setFactorSolverType("mumps")
+        b, x = A.createVecs()
+        b.set(1.0)
+        assert solve([2, 1, 0, 1, 2, 0, 0, 0, 0], reset) < 0               # singular: INFOG(1) = -10
+        assert pc.getFactorMatrix().getMumpsInfog(1) == -10
+        if reset:
+            assert solve([2, 1, 0, 1, 2, 0, 0, 0, 3], reset) > 0          # made anew
+            assert not options.reset_failed_mumps(pc)                      # a good factor stays
+            assert np.allclose(x.getArray(), 1.0 / 3.0)
+        else:
+            with pytest.raises(PETSc.Error) as failed:
+                solve([2, 1, 0, 1, 2, 0, 0, 0, 3], reset)
+            assert failed.value.ierr == 76
+        for obj in (A, ksp, b, x):
+            obj.destroy()

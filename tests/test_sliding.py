@@ -362,6 +362,52 @@ def test_augmented_lagrangian_leaves_sliver_rows_to_the_penalty(tmp_path):
     assert forces[0] == pytest.approx(forces[1], rel=1e-3) and forces[0] == pytest.approx(forces[2], rel=1e-5)
 
 
+def test_augmented_lagrangian_leaves_rows_its_node_barely_moves_to_the_penalty(tmp_path):
+    """The stock sliding cubes at alpha 1e2 in 4 load steps: at load factor 0.75 eight slave nodes stood 0.05 of an
+    element past the lower cube's edge, their rows' areas 1.4-1.6e-3 of the largest (over the area rule's 1e-3)
+    and their own nodes' share of their gaps 0.024 against 0.44; each update raised their multipliers by the same
+    43 Pa, to 1100 Pa (100x the contact's pressure) after 25 updates, and the run stopped (exit 3; 4-64 steps,
+    hunt31_4; at alpha 1e4 they converged holding 5500 Pa). Rows whose stiffness on their own node is below
+    AUGMENTED_SLIVER of the largest (ConstraintTerm.own_stiffness) keep no multiplier: the run converges, on the
+    force of alpha 1e8's penalty to 2e-6 (1 to 8 steps alike, measured)."""
+    al = ["contact.0.enforcement=augmented_lagrangian", "contact.0.penalty=1e2", "load.steps=4"]
+    _, summary = run_scene(CONFIGS / "sliding_cubes.toml", tmp_path / "al", al)
+    _, stiff = run_scene(CONFIGS / "sliding_cubes.toml", tmp_path / "stiff", ["contact.0.penalty=1e8"])
+    assert summary["status"] == "ok" and sum(step["cutbacks"] for step in summary["steps"]) == 0
+    forces = [r["steps"][-1]["contact"]["contact[0] upper.zmin / lower.zmax"]["total_normal_force"]
+              for r in (summary, stiff)]
+    assert forces[0] == pytest.approx(forces[1], rel=2e-5)
+
+
+def test_own_stiffness_reads_the_rows_own_node_against_the_free_dofs():
+    """ConstraintTerm.own_stiffness: |G_k|^2 / (W k_n) with G_k a row's entries on its own node's dofs and k_n
+    K's diagonal along them over the free dofs; a row with no entry on its own node has none (0), one whose
+    direction is wholly held is NaN (never a sliver, nor the largest)."""
+    from petsc4py import PETSc
+    G = PETSc.Mat().createAIJ((9, 9), nnz=9, comm=PETSc.COMM_SELF)
+    G.setValues([0], [0, 1, 2, 3, 4, 5], [0.0, 0.0, 0.3, 0.0, 0.0, 0.7])      # node 0: own 0.3 along z
+    G.setValues([3], [0, 1, 2], [0.0, 0.0, 1.0])                             # node 1: nothing on node 1
+    G.setValues([6], [6, 7, 8], [0.6, 0.0, 0.8])                             # node 2: along (0.6, 0, 0.8)
+    G.assemble()
+    W = G.createVecLeft()
+    W.setValues([0, 3, 6], [0.5, 1.0, 2.0])
+    g = G.createVecLeft()
+    term = solver.ConstraintTerm("t", G, g, W, 1.0, 1.0, np.zeros(3), digest=b"")
+    stiffness = np.array([1.0, 1.0, 4.0, 9.0, 9.0, 9.0, 2.0, 5.0, 3.0])
+    assert np.allclose(term.own_stiffness(stiffness), [0.09 / (0.5 * 4.0), 0.0, 1.0 / (2.0 * (0.36 * 2 + 0.64 * 3))])
+    term.own = None
+    stiffness[[6, 8]] = np.nan                         # node 2 held in x and z: nothing of its direction is free
+    stiffness[2] = np.nan                              # node 0 held along z, its row's whole direction
+    own = term.own_stiffness(stiffness)
+    assert np.isnan(own[0]) and own[1] == 0.0 and np.isnan(own[2])
+    term.own = None
+    stiffness[8] = 3.0                                 # node 2 held in x only: k_n is K_zz
+    assert term.own_stiffness(stiffness)[2] == pytest.approx(1.0 / (2.0 * 3.0))
+    term.destroy()
+    for v in (W, g):
+        v.destroy()
+
+
 def test_augmented_max_iterations_counts_the_updates_applied(tmp_path):
     """augmented_max_iterations = N allows N updates and the test of an (N + 1)-th: the loop counted the test
     too, so N = 1 applied none, and every cutback of the patch test failed (helper pass, session 25). The patch
