@@ -10,11 +10,13 @@ from .mesh import distribute_mesh
 def check(scene, comm):
     """Collective; returns the report text (meaningful on rank 0)."""
     from . import options
+    from .preconditioner import check_multigrid_alpha
     from .solver import check_solver_options
     inserted = options.insert_options(scene.petsc)      # as the run would: the scene's, then the command line's
     try:
         options.check_options()
         check_solver_options(comm)
+        check_multigrid_alpha(scene)
     finally:
         options.remove_options(inserted)
     mesh = distribute_mesh(scene, comm)

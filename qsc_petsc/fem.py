@@ -72,9 +72,14 @@ def shape_tri(xi):
 SHAPE = {"hex": shape_hex, "tet": shape_tet, "quad": shape_quad, "tri": shape_tri}
 
 
-def gauss_line(n):
-    """n-point Gauss-Legendre rule on [-1, 1]: points (n,), weights (n,)."""
-    return np.polynomial.legendre.leggauss(n)
+def gauss_line(n, parts=1):
+    """n-point Gauss-Legendre rule on [-1, 1], or on each of `parts` equal segments of it (a composite rule):
+    points (parts * n,), weights (parts * n,)."""
+    x, w = np.polynomial.legendre.leggauss(n)
+    if parts == 1:
+        return x, w
+    left = -1.0 + 2.0 * np.arange(parts) / parts
+    return (left[:, None] + (x + 1.0) / parts).ravel(), np.tile(w / parts, parts)
 
 
 def gauss_quad(n):
@@ -84,9 +89,9 @@ def gauss_quad(n):
     return np.column_stack([X.ravel(), Y.ravel()]), np.outer(w, w).ravel()
 
 
-def gauss_hex(n):
-    """n^3 Gauss rule on the reference cube."""
-    x, w = gauss_line(n)
+def gauss_hex(n, parts=1):
+    """n^3 Gauss rule on the reference cube (on each of its parts^3 sub-cubes: gauss_line)."""
+    x, w = gauss_line(n, parts)
     X, Y, Z = np.meshgrid(x, x, x, indexing="ij")
     W = w[:, None, None] * w[None, :, None] * w[None, None, :]
     return np.column_stack([X.ravel(), Y.ravel(), Z.ravel()]), W.ravel()
@@ -107,13 +112,14 @@ def gauss_tri(n):
     return np.column_stack([xi, eta]), (WA * WB * (1.0 - A)).ravel()
 
 
-def gauss_tet(n):
-    """Collapsed (Duffy) n^3 Gauss rule on the reference tetrahedron; weights sum to 1/6.
+def gauss_tet(n, parts=1):
+    """Collapsed (Duffy) n^3 Gauss rule on the reference tetrahedron (composite on parts^3 sub-cubes of the
+    collapsed cube: gauss_line); weights sum to 1/6.
 
     n = 1 is the centroid rule (exact to degree 1)."""
-    if n == 1:
+    if n == 1 and parts == 1:
         return np.full((1, 3), 0.25), np.array([1.0 / 6.0])
-    x, w = gauss_line(n)
+    x, w = gauss_line(n, parts)
     a, b = 0.5 * (x + 1.0), 0.5 * w
     A, B, C = np.meshgrid(a, a, a, indexing="ij")
     WA, WB, WC = np.meshgrid(b, b, b, indexing="ij")

@@ -174,33 +174,46 @@ def unread_option(name):
     return None
 
 
+def value_error(name, value):
+    """Why option `name` (without its dash) cannot take `value` (a string, None for no value), or None: a
+    -qsc_*_rtol / _atol / _stol / _divtol or _max_it option with no value, a negative or infinite number, or a
+    Newton solve's ksp_rtol of 1 or more. A value that is no number is left to PETSc, whose message names it.
+    Needs no PETSc (qsc sweep checks its runs' values with it before the first)."""
+    kind = re.search(r"_(rtol|atol|stol|divtol|max_it)$", name) if name.startswith(PREFIX) else None
+    if kind is None:
+        return None
+    integer = kind.group(1) == "max_it"
+    if value in (None, ""):
+        # the value forgotten (-qsc_ksp_max_it -qsc_ksp_monitor, or `ksp_rtol = true` in [petsc]): float(None)
+        # raised a TypeError, a traceback and exit 1 on every rank (hunt32_3)
+        return f"-{name}: needs {'an integer' if integer else 'a number'} (no value given)"
+    try:
+        number = int(value) if integer else float(value)
+    except ValueError:
+        return None
+    if not number >= 0 or (not integer and number == float("inf")):
+        return f"-{name}: must be {'an integer' if integer else 'a finite number'} >= 0, got {value!r}"
+    if name == f"{PREFIX}ksp_rtol" and number >= 1:      # the Newton solve's (the band's is a direct solve)
+        # every linear solve then stops before its first iteration: zero Newton steps, which the step test
+        # took for a converged solve (the two cubes never moved, exit 0; hunt30_6)
+        return (f"-{name}: must be below 1 (at {value} every linear solve stops before its first iteration), "
+                f"got {value!r}")
+    return None
+
+
 def check_options():
     """A SceneError for a solver option without the qsc_ prefix on the command line (unread_option; one from
-    PETSC_OPTIONS or a .petscrc, perhaps kept for other programs, is left alone), or a -qsc_*_rtol / _atol /
-    _stol / _divtol or _max_it option whose number is negative or infinite: PETSc takes a negative tolerance as
-    its own default without a word, and the solve then failed with a reason that did not name the option. A
-    value that is no number is left to PETSc, whose message names it (set_from_options)."""
+    PETSC_OPTIONS or a .petscrc, perhaps kept for other programs, is left alone), or a value value_error refuses:
+    PETSc takes a negative tolerance as its own default without a word, and the solve then failed with a reason
+    that did not name the option."""
     from .errors import SceneError
     for name, value in options_in_effect().items():
         unread = unread_option(name) if name in _COMMAND_LINE else None
         if unread is not None:
             raise SceneError(unread)
-        kind = re.search(r"_(rtol|atol|stol|divtol|max_it)$", name) if name.startswith(PREFIX) else None
-        if kind is None:
-            continue
-        integer = kind.group(1) == "max_it"
-        try:
-            number = int(value) if integer else float(value)
-        except ValueError:
-            continue
-        if not number >= 0 or (not integer and number == float("inf")):
-            raise SceneError(f"-{name}: must be {'an integer' if integer else 'a finite number'} >= 0, "
-                             f"got {value!r}")
-        if name == f"{PREFIX}ksp_rtol" and number >= 1:      # the Newton solve's (the band's is a direct solve)
-            # every linear solve then stops before its first iteration: zero Newton steps, which the step test
-            # took for a converged solve (the two cubes never moved, exit 0; hunt30_6)
-            raise SceneError(f"-{name}: must be below 1 (at {value} every linear solve stops before its first "
-                             f"iteration), got {value!r}")
+        why = value_error(name, value)
+        if why is not None:
+            raise SceneError(why)
     for name, value in options_in_effect().items():
         path = _viewer_file(value) if name.startswith(PREFIX) or name == "log_view" else None
         if path is None:
@@ -259,7 +272,7 @@ def _holders(detail):
     """The options PETSc's message is about, as ' in -name': those whose value it quotes (as not a number, an
     unsupported viewer or a file it cannot open: it names the value, not the option), or a type option given no
     value; '' if none is found."""
-    quoted = (re.search(r"Input string (\S+) has no numeric value", detail)
+    quoted = (re.search(r"Input string (\S+) has no (?:numeric|integer) value", detail)
               or re.search(r"Unsupported viewer (\S+)", detail) or re.search(r"file: (\S+)", detail))
     names = [f"-{name}" for name, value in options_in_effect().items()
              if quoted and value and (value == quoted.group(1) or value.endswith(":" + quoted.group(1)))]

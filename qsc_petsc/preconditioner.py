@@ -372,6 +372,15 @@ def amg_type():
     return option_value("pc_type", AMG_TYPES[0])
 
 
+def check_multigrid_alpha(scene):
+    """A SceneError when solver.contact_multigrid_alpha is set for a multigrid other than BoomerAMG (run and
+    check: `qsc check` passed it, hunt32_3)."""
+    if scene.solver.contact_multigrid_alpha is not None and scene.contact and amg_type() != "hypre":
+        from .errors import SceneError
+        raise SceneError(f"solver.contact_multigrid_alpha: softens the interface for BoomerAMG only, and pc_type is "
+                         f"{amg_type()!r}")
+
+
 def wants_band(mode, has_pairs):
     """Whether to use the band preconditioner: mode "band" always (with contact pairs), "auto" unless the
     options name a preconditioner other than an algebraic multigrid (hypre, gamg), "none" never."""

@@ -193,9 +193,7 @@ class Run:
             slip = (assembly.slip_modes(mesh, u, surfaces, self.bc_dofs)
                     if surfaces and scene.solver.contact_slip_modes else None)
             soft = scene.solver.contact_multigrid_alpha
-            if soft is not None and scene.contact and preconditioner.amg_type() != "hypre":
-                raise SceneError(f"solver.contact_multigrid_alpha: softens the interface for BoomerAMG only, and "
-                                 f"pc_type is {preconditioner.amg_type()!r}")
+            preconditioner.check_multigrid_alpha(scene)
             strain = assembly.dilatations(mesh, u)
             self.system = System(K, self.f_ext, self.bc_dofs, bc_values, nullspace, comm,
                                  scene.solver.max_active_set_iterations, scene.solver.contact_preconditioner,

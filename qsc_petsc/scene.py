@@ -800,6 +800,12 @@ def _cross_check(scene: dict, source_dir: Path) -> None:
         if slave == master:
             raise SceneError(f"contact[{i}].master: self-contact is not supported "
                              f"(slave and master are both on body {_show(slave)})")
+        for j, other in enumerate(scene["contact"][:i]):
+            if {other["slave"], other["master"]} == {pair["slave"], pair["master"]}:
+                # each copy carried half the force and the interface took twice the penalty, without a word
+                raise SceneError(f"contact[{i}]: the same surfaces as contact[{j}] ({_show(pair['slave'])} and "
+                                 f"{_show(pair['master'])}): the interface would be held twice, each pair reporting "
+                                 f"half its force")
         if pair["sliding"] == "large" and pair["reuse_tolerance"] == 0:
             raise SceneError(f"contact[{i}].reuse_tolerance: large sliding needs a tolerance > 0 to tell that its "
                              f"searches have settled, got 0")
@@ -807,7 +813,6 @@ def _cross_check(scene: dict, source_dir: Path) -> None:
     for i, die in enumerate(scene["die"]):
         if die["name"] in dies:
             raise SceneError(f"die[{i}].name: duplicate die name {_show(die['name'])}")
-        dies.add(die["name"])
         moduli = {}
         for j, ref in enumerate(die["surfaces"]):
             body = _check_ref(ref, f"die[{i}].surfaces[{j}]", bodies)
@@ -826,6 +831,13 @@ def _cross_check(scene: dict, source_dir: Path) -> None:
         # A unit normal is kept as is, so that reloading a written scene gives bit-identical numbers.
         if not math.isclose(norm, 1.0, rel_tol=1e-14, abs_tol=0.0):
             die["normal"] = [c / norm for c in die["normal"]]
+        same = ("point", "normal", "motion", "condition")
+        for j, other in enumerate(scene["die"][:i]):
+            if all(other[k] == die[k] for k in same) and set(other["surfaces"]) & set(die["surfaces"]):
+                raise SceneError(f"die[{i}]: the same plane, motion and condition as die[{j}] on "
+                                 f"{_show(sorted(set(other['surfaces']) & set(die['surfaces'])))}: those surfaces would "
+                                 f"be held twice, each die reporting half the force")
+        dies.add(die["name"])
     scene["output"]["directory"] = scene["output"]["directory"].replace("{name}", scene["name"])
 
 

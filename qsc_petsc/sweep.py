@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from .errors import QscError, SceneError
-from .options import split_petsc_args, unread_option
+from .options import PREFIX, split_petsc_args, unread_option, value_error
 
 EXIT_OK, EXIT_INPUT, EXIT_REFERENCE, EXIT_INTERRUPTED = 0, 2, 3, 130
 PHASES = ("mesh", "assembly", "search", "rows", "solve", "output")     # run.py's phases, in run order
@@ -185,12 +185,29 @@ def make_plan(argv):
         unread = unread_option(name[1:])
         if unread is not None:
             raise SweepInputError(unread)
+    # the values each run's own check would refuse (options.value_error), before any run (hunt32_3)
+    values = [(tok[1:], petsc[i + 1] if i + 1 < len(petsc) and not PETSC_KEY.fullmatch(petsc[i + 1]) else None,
+               "the PETSc options for every run") for i, tok in enumerate(petsc) if PETSC_KEY.fullmatch(tok)]
+    for v in variations + reference_only:
+        name = (v.key[1:] if v.kind == "petsc" else
+                PREFIX + v.key[len("petsc."):].replace(".", "_") if v.key.startswith("petsc.") else None)
+        values += [(name, value, repr(v.source)) for value in v.values] if name else []
+    for name, value, where in values:
+        why = value_error(name, None if value in ("true", "") else value)
+        if why is not None:
+            raise SweepInputError(f"{where}: {why}")
     set_keys = {s.partition("=")[0].strip() for s in args.set}
     for v in variations + reference_only:
         if v.kind == "petsc" and v.key in petsc_names:
             raise SweepInputError(f"{v.source!r}: {v.key} is also given as a PETSc option for every run")
         if v.kind == "scene" and v.key in set_keys:
             raise SweepInputError(f"{v.source!r}: {v.key} is also given by --set")
+        # a scene's [petsc] option yields to the command line's: every run would solve alike, each row labelled
+        # with its own value (hunt32_3: petsc.pc_type=gamg,hypre under -qsc_pc_type lu, two LU runs)
+        option = "-" + PREFIX + v.key[len("petsc."):].replace(".", "_") if v.key.startswith("petsc.") else None
+        if v.kind == "scene" and option in petsc_names:
+            raise SweepInputError(f"{v.source!r}: {v.key} is also given as the PETSc option {option} for every "
+                                  f"run, which takes precedence over the scene's [petsc] table")
     if args.timeout is not None and not args.timeout > 0:
         raise SweepInputError(f"--timeout: must be a positive number of seconds, got {args.timeout:g}")
     if args.out == "":
@@ -540,6 +557,33 @@ def write_outputs(plan, rows, command):
 
 # ---------------------------------------------------------------- the sweep
 
+def prepare_out(plan):
+    """The sweep's folder made, and an earlier sweep's tables and runs removed: they are not this one's (its
+    run_NNN folders beyond this sweep's count stayed beside a sweep.csv that did not list them; a helper's test
+    pass, session 26). A SweepInputError when the folder cannot hold the results (a file of its name, or of
+    the reference's, a folder named as a table): a traceback and exit 1 before (hunt32_3)."""
+    out = plan.out
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        what = " (a file of that name is there)" if out.is_file() else ""
+        raise SweepInputError(f"--out: cannot create the folder {str(out)!r}: {exc.strerror}{what}") from None
+    for name in (*TABLES, "reference"):
+        path = out / name
+        if path.exists() and path.is_dir() != (name == "reference"):
+            raise SweepInputError(f"--out: {str(path)!r} is a {'folder' if path.is_dir() else 'file'}: the sweep "
+                                  f"writes its {'reference run' if name == 'reference' else 'table'} there")
+    try:
+        for name in TABLES:
+            (out / name).unlink(missing_ok=True)
+        for folder in out.glob("run_*"):
+            if folder.is_dir() and folder.name[4:].isdigit():      # run_001 ... run_999, run_1000 ...
+                shutil.rmtree(folder)
+    except OSError as exc:
+        raise SweepInputError(f"--out: cannot remove the earlier sweep's {str(exc.filename)!r}: "
+                              f"{exc.strerror}") from None
+
+
 def sweep(plan, say=print, reference=None):
     """Run the reference, then every combination; write the outputs after each run. Returns the rows.
 
@@ -550,14 +594,7 @@ def sweep(plan, say=print, reference=None):
         if reference.get("command") != expected:
             raise ValueError(f"the reused reference ran {shlex.join(reference.get('command', []))}; this "
                              f"sweep's reference would run {shlex.join(expected)}")
-    plan.out.mkdir(parents=True, exist_ok=True)
-    # an earlier sweep's tables and runs are not this one's: its run_NNN folders beyond this sweep's count stayed
-    # beside a sweep.csv that did not list them (a helper's test pass, session 26)
-    for name in TABLES:
-        (plan.out / name).unlink(missing_ok=True)
-    for folder in plan.out.glob("run_*"):
-        if folder.is_dir() and folder.name[4:].isdigit():      # run_001 ... run_999, run_1000 ...
-            shutil.rmtree(folder)
+    prepare_out(plan)
     command = "qsc sweep " + shlex.join(plan.argv)
     combos = plan.combinations()
     n = len(combos) + 1
@@ -602,6 +639,7 @@ def main(argv):
     """The `qsc sweep` command; returns the exit code (0, 2 bad arguments, 3 the reference run failed)."""
     try:
         plan = make_plan(argv)
+        prepare_out(plan)
     except QscError as exc:
         print(f"qsc sweep: error: {exc}")
         return EXIT_INPUT

@@ -320,6 +320,15 @@ def test_argument_errors_print_once(tmp_path, ranks):
         "qsc: error: --out: an empty folder name (omit --out for the scene's output.directory)"], out
 
 
+def test_check_refuses_a_softened_interface_for_gamg(tmp_path):
+    """solver.contact_multigrid_alpha softens the interface for BoomerAMG only: run refused it under pc_type gamg
+    (exit 2), check said the scene was valid (hunt32_3)."""
+    code, out = qsc(["check", CONFIGS / "two_cubes_dies.toml", "--set", "solver.contact_multigrid_alpha=1",
+                     "-qsc_pc_type", "gamg"], cwd=tmp_path)
+    said = "qsc: error: solver.contact_multigrid_alpha: softens the interface for BoomerAMG only, and pc_type is 'gamg'"
+    assert code == 2 and own_lines(out) == [said], out
+
+
 def test_missing_scene_file(tmp_path):
     """A scene path that does not exist shall be exit code 2 with one line naming the path."""
     code, out = qsc(["check", tmp_path / "nothing.toml"])
@@ -711,7 +720,7 @@ def test_a_viewer_option_with_a_bad_value_is_an_input_error(tmp_path, option, ho
 
 
 @pytest.mark.parametrize("case", ["rtol 1", "atol above", "minres", "no cholesky", "value-less", "viewer file",
-                                  "preonly jacobi"])
+                                  "preonly jacobi", "no tolerance"])
 def test_solver_options_that_cannot_work_end_cleanly(tmp_path, case):
     """Options a PETSc user may try, each of which ended in a wrong answer with exit 0 or a traceback with exit 1
     (hunt30_6): -qsc_ksp_rtol 1 stops every linear solve before its first iteration, and the zero Newton steps
@@ -736,6 +745,8 @@ def test_solver_options_that_cannot_work_end_cleanly(tmp_path, case):
                         "a file that cannot be opened in -qsc_snes_converged_reason ('/nonexistent/f.txt'"),
         "preonly jacobi": (["-qsc_ksp_type", "preonly", "-qsc_pc_type", "jacobi", "-qsc_snes_max_it", "5"], 3,
                            "each linear solve was one application of pc_type jacobi (ksp_type preonly), not a solve"),
+        # the value forgotten: a TypeError, a traceback and exit 1 (hunt32_3)
+        "no tolerance": (["-qsc_ksp_max_it", "-qsc_ksp_monitor"], 2, "-qsc_ksp_max_it: needs an integer (no value"),
     }[case]
     proc = subprocess.run([sys.executable, "-m", "qsc_petsc.cli", "run", str(CONFIGS / "block_compression.toml"),
                            "--out", str(tmp_path), *options], capture_output=True, text=True, timeout=120,

@@ -196,3 +196,21 @@ def test_a_pair_that_faces_nothing_has_no_penetration_error():
     assert out["contact[0]"]["max_penetration"] == 0.0 and out["contact[0]"]["max_penetration_value"] == 1e-3
     assert out["contact[1]"]["max_penetration"] is None and out["die[0]"]["max_penetration"] is None
     assert out["die[0]"]["force"] == 0.0
+
+
+def test_a_pair_with_slave_and_master_swapped_compares_the_same_force():
+    """The pair's force is on its slave: with the roles swapped against the reference it is the reference's force
+    on the other body, reversed. compare read it as a 200 % force error on the same answer (hunt32_3)."""
+    def step(key, fz):
+        record = {"contact": {key: {"force_on_slave": [0.0, 0.0, fz], "max_penetration_slave": 1e-3,
+                                    "max_penetration_master": None}}}
+        return type("Step", (), {"step_record": lambda self: record})()
+
+    swapped = compare.contact_errors(step("contact[0] lower.zmax / upper.zmin", 1.0 + 1e-3),
+                                     step("contact[0] upper.zmin / lower.zmax", -1.0))
+    assert swapped["contact[0]"]["force"] == pytest.approx(1e-3)
+    same = compare.contact_errors(step("contact[0] upper.zmin / lower.zmax", 1.0 + 1e-3),
+                                  step("contact[0] upper.zmin / lower.zmax", 1.0))
+    assert same["contact[0]"]["force"] == pytest.approx(1e-3)
+    other = compare.contact_errors(step("contact[0] a.s / b.s", 1.0), step("contact[0] c.s / d.s", -1.0))
+    assert other["contact[0]"]["force"] == pytest.approx(2.0)      # another pair: no swap to undo

@@ -750,3 +750,15 @@ def test_gate_positions():
     np.testing.assert_array_equal(got, [-1, 0, 0, -1, -1, 4, 4])
     with pytest.raises(ValueError):
         gate_positions(np.array([31, 7]), [31], [30])
+
+
+def test_swap_indicator_has_the_penalty_as_its_floor():
+    """summary.json's swap_indicator compares the two sides' mean penetrations over the nodes that carry force,
+    against p / eps_n at least: an augmented Lagrangian's exact answer (two round-off means) read 1.2-2.0, and
+    open nodes within reach made it the footprints' difference (hunt32_2)."""
+    from qsc_petsc.contact.model import _swap_indicator
+    eps_n, p, area = 1e8, 2.0, 0.5               # (area x penetration, area, area x pressure) per side
+    assert _swap_indicator((area * 2e-17, area, area * p), (area * -1e-17, area, area * p), eps_n) < 1e-8
+    assert _swap_indicator((area * 2e-8, area, area * p), (area * 2e-8, area, area * p), eps_n) == 0.0
+    assert _swap_indicator((area * 2e-8, area, area * p), (0.0, area, area * p), eps_n) == pytest.approx(1.0)
+    assert _swap_indicator((0.0, 0.0, 0.0), (0.0, 0.0, 0.0), eps_n) == 0.0           # nothing presses

@@ -237,6 +237,12 @@ CASES = [
     (_set(["die", 0, "surfaces"], ["top.zmax", "top.zmax"]), 'die[0].surfaces[1]: "top.zmax" is listed twice'),
     (_set(["die", 0, "surfaces"], ["top.zmax", "bottom.side"]), 'die[0].surfaces[1]: box body "bottom" has no surface'),
     (lambda d: d["die"].append(copy.deepcopy(d["die"][0])), 'die[1].name: duplicate die name "punch"'),
+    # a pair or die given twice: each copy reported half the force, the penalty doubled (hunt32_1)
+    (lambda d: d["contact"].append(copy.deepcopy(d["contact"][0])), "contact[1]: the same surfaces as contact[0]"),
+    (lambda d: d["contact"].append(dict(d["contact"][0], slave=d["contact"][0]["master"],
+                                        master=d["contact"][0]["slave"])), "contact[1]: the same surfaces as contact[0]"),
+    (lambda d: d["die"].append(dict(copy.deepcopy(d["die"][0]), name="again")),
+     'die[1]: the same plane, motion and condition as die[0] on ["top.zmax"]'),
 ]
 
 

@@ -76,6 +76,12 @@ def test_pareto_front():
     (["--vary", "contact.0.penalty=1e2", "--reference", "bodies.7.mesh.cells=[2,2,2]"], "bodies[7]"),
     (["--vary", "petsc.pc_type=lu", "-qsc_pc_type", "lu", "--vary", "-qsc_pc_type=gamg,lu"], "-qsc_pc_type"),
     (["--vary", "contact.0.penalty=1e2,1e4", "--timeout", "-5"], "--timeout: must be a positive number"),
+    # a scene [petsc] value the command line overrides: every run alike, labelled apart (hunt32_3)
+    (["--vary", "petsc.pc_type=gamg,hypre", "-qsc_pc_type", "lu"], "the PETSc option -qsc_pc_type for every run"),
+    # values each run would refuse, refused before the first (hunt32_3)
+    (["--vary", "-qsc_ksp_rtol=1e-8,2"], "-qsc_ksp_rtol: must be below 1"),
+    (["--vary", "petsc.ksp_max_it=-1,3"], "-qsc_ksp_max_it: must be an integer >= 0"),
+    (["--vary", "contact.0.penalty=1e2,1e4", "-qsc_ksp_rtol"], "-qsc_ksp_rtol: needs a number (no value given)"),
 ])
 def test_bad_arguments_exit_2_before_any_run(tmp_path, capsys, args, names):
     out = tmp_path / "sweep"
@@ -88,6 +94,23 @@ def test_bad_arguments_exit_2_before_any_run(tmp_path, capsys, args, names):
 def test_empty_out_is_refused(capsys):
     assert cli.main(["sweep", SCENE, "--out", ""] + TINY + ["--vary", "contact.0.penalty=1e2,1e4"]) == 2
     assert "--out: an empty folder name" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("layout, said", [
+    ("file", "--out: cannot create the folder"), ("under a file", "--out: cannot create the folder"),
+    ("table folder", "sweep.csv' is a folder"), ("reference file", "reference' is a file")])
+def test_an_out_that_cannot_hold_the_results_is_refused(tmp_path, capsys, layout, said):
+    """An --out the sweep cannot write in ended in a traceback, exit 1 (hunt32_3): one line, exit 2."""
+    out = {"file": tmp_path / "f", "under a file": tmp_path / "f" / "sub"}.get(layout, tmp_path / "sweep")
+    (tmp_path / "f").write_text("")
+    if layout == "table folder":
+        (out / "sweep.csv").mkdir(parents=True)
+    if layout == "reference file":
+        out.mkdir()
+        (out / "reference").write_text("")
+    assert cli.main(["sweep", SCENE, "--out", str(out)] + TINY + ["--vary", "contact.0.penalty=1e2,1e4"]) == 2
+    text = capsys.readouterr().out
+    assert len(text.strip().splitlines()) == 1 and said in text, text
 
 
 @pytest.mark.skipif(shutil.which("mpirun") is None, reason="mpirun not found")
