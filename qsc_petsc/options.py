@@ -206,6 +206,8 @@ def check_options():
     PETSC_OPTIONS or a .petscrc, perhaps kept for other programs, is left alone), or a value value_error refuses:
     PETSc takes a negative tolerance as its own default without a word, and the solve then failed with a reason
     that did not name the option."""
+    from petsc4py import PETSc
+
     from .errors import SceneError
     for name, value in options_in_effect().items():
         unread = unread_option(name) if name in _COMMAND_LINE else None
@@ -224,7 +226,11 @@ def check_options():
                "its folder does not exist or is not writable")
         if why:
             # rank 0 alone opens an ASCII viewer's file: its failure there left the other ranks waiting (exit 1
-            # after 40 s on 2 ranks; hunt30_6, hunt30_7: ":FILE", a folder as FILE, -log_view at the end)
+            # after 40 s on 2 ranks; hunt30_6, hunt30_7: ":FILE", a folder as FILE, -log_view at the end).
+            # PetscFinalize writes -log_view's report: out of the database, or its error stack follows the line
+            # (hunt32_3)
+            if name == "log_view":
+                PETSc.Options().delValue(name)
             raise SceneError(f"PETSc options: {_OPTION_ERRORS[65]} in -{name} ({path!r}: {why})")
 
 

@@ -25,6 +25,8 @@ FREE_TOL = 1e-9
 SHOW_TOL = 0.3
 # Restraint.loose: a row whose force is at most this share of the largest row force carries none
 LOOSE_SHARE = 1e-9
+# ... or at most this many times its own round-off (Restraint.loose)
+LOOSE_ROUND_OFF = 100.0
 
 
 def free_motions(gram, body_names):
@@ -122,7 +124,7 @@ class Restraint:
             GR.destroy()
         return self.seen[term]
 
-    def loose(self, terms, floor=0.0):
+    def loose(self, terms, floor=0.0, u=None):
         """The motions that only active rows carrying no force hold (their force at most LOOSE_SHARE of the
         largest row force of all terms, or of `floor` (System.force_floor) if that is larger): {body name: [mode
         names]}, empty if the boundary conditions and the rows that press hold every body (collective). Such a
@@ -132,6 +134,11 @@ class Restraint:
         forces = [np.abs(term.m.getArray()[term.rows]) for term in terms]
         largest = self.comm.allreduce(max((float(f.max(initial=0.0)) for f in forces), default=0.0), op=MPI.MAX)
         pressing = [term.active & (f > LOOSE_SHARE * max(largest, floor)) for term, f in zip(terms, forces)]
+        if u is not None:
+            # ... nor one whose force is its own round-off, eps_n eps (|G| |u| + |g|) / W: rows whose gap closed to
+            # round-off held the bodies of a floating stack, of which only the top one was named (hunt32_1)
+            pressing = [p & (f > LOOSE_ROUND_OFF * term.eps_n * np.finfo(float).eps * term._row_scale(u)
+                             / term.W.getArray()[term.rows]) for p, f, term in zip(pressing, forces, terms)]
         if self.comm.allreduce(all(np.array_equal(p, term.active) for p, term in zip(pressing, terms)), op=MPI.LAND):
             return {}                   # every active row carries force: the solve's own check holds
         return self.free(terms, True, pressing)

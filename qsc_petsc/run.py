@@ -332,7 +332,7 @@ class Run:
                         point.update(cpoint)
                         for line in self.contact.slip_warnings(record["contact"]):
                             self.log(f"step {step}: warning: {line}")
-                        loose = describe(self.restraint.loose(system.terms, system.force_floor))
+                        loose = describe(self.restraint.loose(system.terms, system.force_floor, u))
                         if loose:
                             record["loose"] = loose
                         if loose and loose != last_loose:

@@ -785,7 +785,8 @@ def _cross_check(scene: dict, source_dir: Path) -> None:
         if mesh["type"] == "file":
             mesh["path"] = os.path.abspath(source_dir / mesh["path"])
             if not os.path.isfile(mesh["path"]):
-                raise SceneError(f"bodies[{i}].mesh.path: file not found: {mesh['path']}")
+                what = "a folder, not a mesh file" if os.path.isdir(mesh["path"]) else "file not found"
+                raise SceneError(f"bodies[{i}].mesh.path: {what}: {mesh['path']}")
         elif mesh["type"] == "hertz":
             mesh["cache"] = os.path.abspath(mesh["cache"])
     for i, bc in enumerate(scene["boundary"]):

@@ -395,11 +395,18 @@ def _fmt(x, spec=".3g"):
     return format(x, spec) if isinstance(x, float) else str(x)
 
 
+# errors this close (relative) are the same answer's: 1 and 2 ranks of one scene differ by round-off (3e-16), and
+# the slower run was marked on the front beside the faster one (hunt32_3)
+ERROR_TIE = 1e-9
+
+
 def pareto_front(points):
-    """Indices of the non-dominated (time, error) points: no other point is as fast and as accurate, and better in one."""
+    """Indices of the non-dominated (time, error) points: no other point is as fast and as accurate, and better in
+    one (errors within ERROR_TIE of each other, relative, are equal)."""
     front = []
     for i, (t, e) in enumerate(points):
-        if not any((t2 <= t and e2 <= e) and (t2 < t or e2 < e) for j, (t2, e2) in enumerate(points) if j != i):
+        if not any((t2 <= t and e2 <= e * (1 + ERROR_TIE)) and (t2 < t or e2 < e * (1 - ERROR_TIE))
+                   for j, (t2, e2) in enumerate(points) if j != i):
             front.append(i)
     return front
 

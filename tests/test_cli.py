@@ -720,7 +720,7 @@ def test_a_viewer_option_with_a_bad_value_is_an_input_error(tmp_path, option, ho
 
 
 @pytest.mark.parametrize("case", ["rtol 1", "atol above", "minres", "no cholesky", "value-less", "viewer file",
-                                  "preonly jacobi", "no tolerance"])
+                                  "preonly jacobi", "no tolerance", "log_view file"])
 def test_solver_options_that_cannot_work_end_cleanly(tmp_path, case):
     """Options a PETSc user may try, each of which ended in a wrong answer with exit 0 or a traceback with exit 1
     (hunt30_6): -qsc_ksp_rtol 1 stops every linear solve before its first iteration, and the zero Newton steps
@@ -747,13 +747,15 @@ def test_solver_options_that_cannot_work_end_cleanly(tmp_path, case):
                            "each linear solve was one application of pc_type jacobi (ksp_type preonly), not a solve"),
         # the value forgotten: a TypeError, a traceback and exit 1 (hunt32_3)
         "no tolerance": (["-qsc_ksp_max_it", "-qsc_ksp_monitor"], 2, "-qsc_ksp_max_it: needs an integer (no value"),
+        # PetscFinalize still wrote the report and printed its error stack after the line (hunt32_3)
+        "log_view file": (["-log_view", ":/nonexistent/f.txt"], 2, "a file that cannot be opened in -log_view"),
     }[case]
     proc = subprocess.run([sys.executable, "-m", "qsc_petsc.cli", "run", str(CONFIGS / "block_compression.toml"),
                            "--out", str(tmp_path), *options], capture_output=True, text=True, timeout=120,
                           check=False)
     assert proc.returncode == code, proc.stdout + proc.stderr
     assert said in proc.stdout.splitlines()[-1], proc.stdout
-    assert "Traceback" not in proc.stderr + proc.stdout
+    assert "Traceback" not in proc.stderr + proc.stdout and "PETSC ERROR" not in proc.stderr + proc.stdout
     assert json.loads((tmp_path / "summary.json").read_text())["status"] == "failed"
     assert (tmp_path / "petsc_options.txt").exists()
 

@@ -66,6 +66,8 @@ def test_pareto_front():
     pts = [(1.0, 1.0), (2.0, 0.5), (2.0, 2.0), (3.0, 0.5), (0.5, 3.0), (1.0, 1.0)]
     # (2, 2) is dominated by (1, 1); (3, 0.5) by (2, 0.5); the two equal points dominate neither each other
     assert pareto_front(pts) == [0, 1, 4, 5]
+    # the same answer on 2 ranks, slower, round-off apart: not on the front (hunt32_3)
+    assert pareto_front([(0.73, 8.330889926361691e-4), (2.03, 8.330889926359006e-4)]) == [0]
 
 
 @pytest.mark.parametrize("args, names", [
