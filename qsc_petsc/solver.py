@@ -47,6 +47,9 @@ AUGMENTED_ROUND_OFF_CAP = 1e-3
 # stand at 5e-7-5e-6 of the largest, every other row of the sliding cubes at 9e-4 or more (1e-2 or more but in
 # one increment; a row of a mesh 10x finer than the pair's coarser side at ~0.1)
 AUGMENTED_SLIVER = 1e-4
+# a try that ends on AUGMENTED_LAGRANGIAN_MAX_IT after a halving, its multipliers' change above this share of the
+# try before's, ends the cutbacks (solve_load_step)
+AUGMENTED_CUTBACK_GAIN = 0.5
 KSP_MAX_IT = 2000              # Krylov iterations per linear solve unless -qsc_ksp_max_it says otherwise
 # SNES types that take Newton steps with the Jacobian and stop by System._converged (the active set and the force
 # residual): the others stop by tests of their own (ksponly after one linear solve, ngmres on a step norm it never
@@ -1176,6 +1179,8 @@ def solve_load_step(system, step, t_prev, t_target, u, update_terms, max_cutback
     resume = None         # the increment before the first halving for a sticking die's unknown path
     cutbacks, records = 0, []
     failed, cause, splits = False, None, 0
+    unsettled = []        # the multipliers' last change of each try that ended on AUGMENTED_LAGRANGIAN_MAX_IT
+    halved = 0            # the cutbacks made (the failures' halvings)
     while t < t_target - 1e-14:
         t_try = min(t + dt, t_target)
         system.set_terms(update_terms(u, t_try, t, before))
@@ -1243,6 +1248,13 @@ def solve_load_step(system, step, t_prev, t_target, u, update_terms, max_cutback
             continue
         # a die's nodes whose faces turn away from it go through it at any increment: no cutback helps (hunt31_3)
         cutbacks = max_cutbacks + 1 if stats["snes_reason"] == "OUT_OF_REACH" and cause == "away" else cutbacks + 1
+        # Uzawa's rate does not depend on the increment: a halved try whose multipliers still changed by more than
+        # AUGMENTED_CUTBACK_GAIN of the last try's will not settle at any size either (two_pass at alpha 1e2 on the
+        # two cubes: 1e-4 after 25 updates at every one of 4 cutbacks, ~100 solves; hunt32_2)
+        if stats["snes_reason"] == "AUGMENTED_LAGRANGIAN_MAX_IT":
+            unsettled.append(stats["multipliers_unsettled"][1])
+            if len(unsettled) > 1 and unsettled[-1] > AUGMENTED_CUTBACK_GAIN * unsettled[-2]:
+                cutbacks = max(cutbacks, max_cutbacks + 1)
         if log and cutbacks <= max_cutbacks:
             log(f"step {step}: solve at load factor {t_try:.6g} failed "
                 f"({stats['snes_reason']}, KSP {stats['ksp_reason']}); cutting the increment in half")
@@ -1263,8 +1275,11 @@ def solve_load_step(system, step, t_prev, t_target, u, update_terms, max_cutback
                        "leave them to qsc, which sets the Krylov stop below the Newton target")
             if stats["snes_reason"] == "AUGMENTED_LAGRANGIAN_MAX_IT":
                 name, change, tol = stats["multipliers_unsettled"]
+                stalled = (f"; a halved increment left them as far ({unsettled[-2]:.2g} before), so no more were "
+                           f"tried" if len(unsettled) > 1 and unsettled[-1] > AUGMENTED_CUTBACK_GAIN * unsettled[-2]
+                           else "")
                 why = (f"; the multipliers of {name} still changed by {change:.2g} (relative; its "
-                       f"augmented_tolerance {tol:g}) after {augmented_max} updates: raise "
+                       f"augmented_tolerance {tol:g}) after {augmented_max} updates{stalled}: raise "
                        f"{name}.augmented_max_iterations, or its penalty (the updates converge the faster the "
                        f"stiffer it is)")
             if stats["snes_reason"] == "OUT_OF_REACH" and cause == "away":
@@ -1282,9 +1297,10 @@ def solve_load_step(system, step, t_prev, t_target, u, update_terms, max_cutback
                 why = (f"; the rows of the large-sliding pairs had not settled after {max_searches} searches "
                        f"(contact[i].max_searches; more load steps slide less per increment)")
             raise ConvergenceError(
-                f"load step {step} (load factor {t_try:.6g}) did not converge after {max_cutbacks} "
+                f"load step {step} (load factor {t_try:.6g}) did not converge after {halved} "
                 f"cutbacks: SNES {stats['snes_reason']} after {stats['snes_iterations']} iterations, "
                 f"KSP {stats['ksp_reason']}{why}")
+        halved += 1
         dt *= 0.5
     return u, {"cutbacks": cutbacks, "solves": records}, before
 

@@ -408,6 +408,21 @@ def test_own_stiffness_reads_the_rows_own_node_against_the_free_dofs():
         v.destroy()
 
 
+def test_cutbacks_end_when_halving_leaves_the_multipliers_as_far(tmp_path):
+    """two_pass with the augmented Lagrangian at alpha 1e2 on the two cubes: its multipliers still changed by ~1e-5
+    after 25 updates at every size of the first increment, and the run cut it back 4 times (~100 solves) before
+    saying so (hunt32_2). Uzawa's rate does not depend on the increment: once a halved try leaves them more than
+    AUGMENTED_CUTBACK_GAIN of the last try's change, the run stops, saying that and how many cutbacks it made."""
+    lines = []
+    with pytest.raises(ConvergenceError, match=r"did not converge after [0-3] cutbacks: SNES AUGMENTED_LAGRANGIAN_MAX_IT"
+                                               r".* after 25 updates; a halved increment left them as far \(.*\), so "
+                                               r"no more were tried: raise contact\[0\]\.augmented_max_iterations"):
+        run_scene(CONFIGS / "two_cubes_dies.toml", tmp_path / "tp",
+                  ["contact.0.formulation=two_pass", "contact.0.enforcement=augmented_lagrangian",
+                   "contact.0.penalty=1e2"], log=lines.append)
+    assert len([line for line in lines if "cutting the increment in half" in line]) < 4      # max_cutbacks' default
+
+
 def test_augmented_max_iterations_counts_the_updates_applied(tmp_path):
     """augmented_max_iterations = N allows N updates and the test of an (N + 1)-th: the loop counted the test
     too, so N = 1 applied none, and every cutback of the patch test failed (helper pass, session 25). The patch
