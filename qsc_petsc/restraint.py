@@ -135,10 +135,9 @@ class Restraint:
         largest = self.comm.allreduce(max((float(f.max(initial=0.0)) for f in forces), default=0.0), op=MPI.MAX)
         pressing = [term.active & (f > LOOSE_SHARE * max(largest, floor)) for term, f in zip(terms, forces)]
         if u is not None:
-            # ... nor one whose force is its own round-off, eps_n eps (|G| |u| + |g|) / W: rows whose gap closed to
+            # ... nor one whose force is its own round-off (ConstraintTerm.round_off): rows whose gap closed to
             # round-off held the bodies of a floating stack, of which only the top one was named (hunt32_1)
-            pressing = [p & (f > LOOSE_ROUND_OFF * term.eps_n * np.finfo(float).eps * term._row_scale(u)
-                             / term.W.getArray()[term.rows]) for p, f, term in zip(pressing, forces, terms)]
+            pressing = [p & (f > LOOSE_ROUND_OFF * term.round_off(u)) for p, f, term in zip(pressing, forces, terms)]
         if self.comm.allreduce(all(np.array_equal(p, term.active) for p, term in zip(pressing, terms)), op=MPI.LAND):
             return {}                   # every active row carries force: the solve's own check holds
         return self.free(terms, True, pressing)

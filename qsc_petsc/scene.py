@@ -814,6 +814,7 @@ def _cross_check(scene: dict, source_dir: Path) -> None:
     for i, die in enumerate(scene["die"]):
         if die["name"] in dies:
             raise SceneError(f"die[{i}].name: duplicate die name {_show(die['name'])}")
+        dies.add(die["name"])
         moduli = {}
         for j, ref in enumerate(die["surfaces"]):
             body = _check_ref(ref, f"die[{i}].surfaces[{j}]", bodies)
@@ -832,13 +833,11 @@ def _cross_check(scene: dict, source_dir: Path) -> None:
         # A unit normal is kept as is, so that reloading a written scene gives bit-identical numbers.
         if not math.isclose(norm, 1.0, rel_tol=1e-14, abs_tol=0.0):
             die["normal"] = [c / norm for c in die["normal"]]
-        same = ("point", "normal", "motion", "condition")
         for j, other in enumerate(scene["die"][:i]):
-            if all(other[k] == die[k] for k in same) and set(other["surfaces"]) & set(die["surfaces"]):
-                raise SceneError(f"die[{i}]: the same plane, motion and condition as die[{j}] on "
-                                 f"{_show(sorted(set(other['surfaces']) & set(die['surfaces'])))}: those surfaces would "
-                                 f"be held twice, each die reporting half the force")
-        dies.add(die["name"])
+            shared = sorted(set(other["surfaces"]) & set(die["surfaces"]))
+            if shared and all(other[k] == die[k] for k in ("point", "normal", "motion", "condition")):
+                raise SceneError(f"die[{i}]: the same plane, motion and condition as die[{j}] on {_show(shared)}: "
+                                 f"those surfaces would be held twice, each die reporting half the force")
     scene["output"]["directory"] = scene["output"]["directory"].replace("{name}", scene["name"])
 
 

@@ -162,6 +162,11 @@ class ConstraintTerm:
             v.destroy()
         return scale
 
+    def round_off(self, u):
+        """Per existing row, the round-off of its multiplier (force per area) at u: the rows' round-off
+        eps (|G| |u| + |g|) in C is eps_n eps (|G| |u| + |g|) / W in a multiplier (collective)."""
+        return self.eps_n * np.finfo(float).eps * self._row_scale(u) / self.W.getArray()[self.rows]
+
     def evaluate(self, u):
         """Row values, multipliers and active set at u (collective)."""
         c = self.row_values(u)
@@ -272,10 +277,10 @@ class ConstraintTerm:
         top = comm.allreduce(float(np.nanmax(own, initial=0.0)), op=MPI.MAX)
         sliver = np.nan_to_num(own, nan=np.inf) < AUGMENTED_SLIVER * top
         new[sliver] = 0.0
-        # the rows' round-off, eps (|G| |u| + |g|) in C, is eps_n eps (|G| |u| + |g|) / W in a multiplier: on the
-        # rows that hold one, the floor of the updates' change (AUGMENTED_ROUND_OFF)
+        # the multipliers' round-off (round_off), on the rows that hold one: the floor of the updates' change
+        # (AUGMENTED_ROUND_OFF)
         held = ~sliver & ((new > 0) | (self.lmbda > 0))
-        noise = np.sum((self.eps_n * np.finfo(float).eps * self._row_scale(u)[held] / W[held]) ** 2)
+        noise = np.sum(self.round_off(u)[held] ** 2)
         change, size, count, noise = comm.allreduce(
             np.array([np.sum((new - self.lmbda) ** 2), np.sum(new ** 2), len(new), noise], dtype=float), op=MPI.SUM)
         # relative to the multipliers, or to pressure_floor on every row where they are smaller: a contact that
@@ -1180,7 +1185,6 @@ def solve_load_step(system, step, t_prev, t_target, u, update_terms, max_cutback
     cutbacks, records = 0, []
     failed, cause, splits = False, None, 0
     unsettled = []        # the multipliers' last change of each try that ended on AUGMENTED_LAGRANGIAN_MAX_IT
-    halved = 0            # the cutbacks made (the failures' halvings)
     while t < t_target - 1e-14:
         t_try = min(t + dt, t_target)
         system.set_terms(update_terms(u, t_try, t, before))
@@ -1246,19 +1250,20 @@ def solve_load_step(system, step, t_prev, t_target, u, update_terms, max_cutback
                     f"where no earlier state gives their path: halving it, so that they meet it in one that does")
             dt *= 0.5
             continue
+        cutbacks += 1
         # a die's nodes whose faces turn away from it go through it at any increment: no cutback helps (hunt31_3)
-        cutbacks = max_cutbacks + 1 if stats["snes_reason"] == "OUT_OF_REACH" and cause == "away" else cutbacks + 1
+        away = stats["snes_reason"] == "OUT_OF_REACH" and cause == "away"
         # Uzawa's rate does not depend on the increment: a halved try whose multipliers still changed by more than
         # AUGMENTED_CUTBACK_GAIN of the last try's will not settle at any size either (two_pass at alpha 1e2 on the
         # two cubes: 1e-4 after 25 updates at every one of 4 cutbacks, ~100 solves; hunt32_2)
         if stats["snes_reason"] == "AUGMENTED_LAGRANGIAN_MAX_IT":
             unsettled.append(stats["multipliers_unsettled"][1])
-            if len(unsettled) > 1 and unsettled[-1] > AUGMENTED_CUTBACK_GAIN * unsettled[-2]:
-                cutbacks = max(cutbacks, max_cutbacks + 1)
-        if log and cutbacks <= max_cutbacks:
+        stalled = len(unsettled) > 1 and unsettled[-1] > AUGMENTED_CUTBACK_GAIN * unsettled[-2] and \
+            stats["snes_reason"] == "AUGMENTED_LAGRANGIAN_MAX_IT"
+        if log and cutbacks <= max_cutbacks and not (away or stalled):
             log(f"step {step}: solve at load factor {t_try:.6g} failed "
                 f"({stats['snes_reason']}, KSP {stats['ksp_reason']}); cutting the increment in half")
-        if cutbacks > max_cutbacks:
+        if cutbacks > max_cutbacks or away or stalled:
             free = stats.get("free_motion", "")
             why = (f"; an iterate left {free} held by no boundary and no closed contact row (a body held only "
                    f"by contact that separates has no equilibrium)") if free else ""
@@ -1275,14 +1280,13 @@ def solve_load_step(system, step, t_prev, t_target, u, update_terms, max_cutback
                        "leave them to qsc, which sets the Krylov stop below the Newton target")
             if stats["snes_reason"] == "AUGMENTED_LAGRANGIAN_MAX_IT":
                 name, change, tol = stats["multipliers_unsettled"]
-                stalled = (f"; a halved increment left them as far ({unsettled[-2]:.2g} before), so no more were "
-                           f"tried" if len(unsettled) > 1 and unsettled[-1] > AUGMENTED_CUTBACK_GAIN * unsettled[-2]
-                           else "")
+                halving = (f"; a halved increment left them as far ({unsettled[-2]:.2g} before), so no more were "
+                           f"tried" if stalled else "")
                 why = (f"; the multipliers of {name} still changed by {change:.2g} (relative; its "
-                       f"augmented_tolerance {tol:g}) after {augmented_max} updates{stalled}: raise "
+                       f"augmented_tolerance {tol:g}) after {augmented_max} updates{halving}: raise "
                        f"{name}.augmented_max_iterations, or its penalty (the updates converge the faster the "
                        f"stiffer it is)")
-            if stats["snes_reason"] == "OUT_OF_REACH" and cause == "away":
+            if away:
                 why = (f"; {stats['out_of_reach']} within the die's reach, of faces turned away from it, went "
                        f"through it: {DIE_AWAY}")
             elif stats["snes_reason"] == "OUT_OF_REACH":
@@ -1297,10 +1301,9 @@ def solve_load_step(system, step, t_prev, t_target, u, update_terms, max_cutback
                 why = (f"; the rows of the large-sliding pairs had not settled after {max_searches} searches "
                        f"(contact[i].max_searches; more load steps slide less per increment)")
             raise ConvergenceError(
-                f"load step {step} (load factor {t_try:.6g}) did not converge after {halved} "
+                f"load step {step} (load factor {t_try:.6g}) did not converge after {cutbacks - 1} "
                 f"cutbacks: SNES {stats['snes_reason']} after {stats['snes_iterations']} iterations, "
                 f"KSP {stats['ksp_reason']}{why}")
-        halved += 1
         dt *= 0.5
     return u, {"cutbacks": cutbacks, "solves": records}, before
 

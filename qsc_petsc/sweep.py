@@ -156,6 +156,12 @@ class Plan:
         return {v.key: v.kind for v in self.variations + self.reference_only}
 
 
+def _scene_option(key):
+    """The PETSc option a scene key of the [petsc] table sets (petsc.ksp_rtol: -qsc_ksp_rtol; nested tables
+    joined by "_"), or None for any other key."""
+    return "-" + PREFIX + key[len("petsc."):].replace(".", "_") if key.startswith("petsc.") else None
+
+
 def make_plan(argv):
     """Parse and validate the sweep's arguments; every combination's scene is loaded (no run yet)."""
     from .scene import load_scene
@@ -189,9 +195,8 @@ def make_plan(argv):
     values = [(tok[1:], petsc[i + 1] if i + 1 < len(petsc) and not PETSC_KEY.fullmatch(petsc[i + 1]) else None,
                "the PETSc options for every run") for i, tok in enumerate(petsc) if PETSC_KEY.fullmatch(tok)]
     for v in variations + reference_only:
-        name = (v.key[1:] if v.kind == "petsc" else
-                PREFIX + v.key[len("petsc."):].replace(".", "_") if v.key.startswith("petsc.") else None)
-        values += [(name, value, repr(v.source)) for value in v.values] if name else []
+        option = v.key if v.kind == "petsc" else _scene_option(v.key)
+        values += [(option[1:], value, repr(v.source)) for value in v.values] if option else []
     for name, value, where in values:
         why = value_error(name, None if value in ("true", "") else value)
         if why is not None:
@@ -204,8 +209,8 @@ def make_plan(argv):
             raise SweepInputError(f"{v.source!r}: {v.key} is also given by --set")
         # a scene's [petsc] option yields to the command line's: every run would solve alike, each row labelled
         # with its own value (hunt32_3: petsc.pc_type=gamg,hypre under -qsc_pc_type lu, two LU runs)
-        option = "-" + PREFIX + v.key[len("petsc."):].replace(".", "_") if v.key.startswith("petsc.") else None
-        if v.kind == "scene" and option in petsc_names:
+        option = _scene_option(v.key) if v.kind == "scene" else None
+        if option in petsc_names:
             raise SweepInputError(f"{v.source!r}: {v.key} is also given as the PETSc option {option} for every "
                                   f"run, which takes precedence over the scene's [petsc] table")
     if args.timeout is not None and not args.timeout > 0:
