@@ -85,6 +85,18 @@ def factored_by_mumps(pc):
     return pc.getType() in ("lu", "cholesky") and package == "mumps"
 
 
+def mumps_factor(pc):
+    """pc's MUMPS factor, or None before its first factorization (a try that failed before its first linear
+    solve: PETSc error 58 from PCFactorGetMatrix)."""
+    from petsc4py import PETSc
+    try:
+        return pc.getFactorMatrix()
+    except PETSc.Error as exc:
+        if exc.ierr == 58:
+            return None
+        raise
+
+
 def more_mumps_workspace(pc, prefix, own):
     """After pc's MUMPS factorization ran out of workspace (INFOG(1) in MUMPS_WORKSPACE_ERRORS): its memory
     relaxation ICNTL(14) doubled in the options database as -<prefix>mat_mumps_icntl_14 (read when a factor is
@@ -93,7 +105,9 @@ def more_mumps_workspace(pc, prefix, own):
     relaxation, or None when that was not the failure, the relaxation is spent, or the user set it (it stands).
     Collective (INFOG is global)."""
     from petsc4py import PETSc
-    F = pc.getFactorMatrix()
+    F = mumps_factor(pc)
+    if F is None:
+        return None
     relax = 2 * max(F.getMumpsIcntl(14), 20)
     if F.getMumpsInfog(1) not in MUMPS_WORKSPACE_ERRORS or relax > MUMPS_MAX_RELAXATION:
         return None
@@ -113,16 +127,10 @@ def reset_failed_mumps(pc):
     next solve called MUMPS with none (INFOG(1) = -3, PETSc error 76). A body pulled off the contact that held it,
     on 2 ranks: that error ended the run instead of the cutbacks and their diagnostic, on a machine where MUMPS's
     parallel pivoting met the singular iterate's null pivot. Returns whether it reset pc. Collective."""
-    from petsc4py import PETSc
     if not factored_by_mumps(pc):
         return False
-    try:
-        F = pc.getFactorMatrix()
-    except PETSc.Error as exc:         # no factor yet (a try that failed before its first linear solve)
-        if exc.ierr == 58:
-            return False
-        raise
-    if F.getMumpsInfog(1) >= 0:
+    F = mumps_factor(pc)
+    if F is None or F.getMumpsInfog(1) >= 0:
         return False
     pc.reset()
     return True
@@ -176,8 +184,8 @@ def unread_option(name):
 
 def value_error(name, value):
     """Why option `name` (without its dash) cannot take `value` (a string, None for no value), or None: a
-    -qsc_*_rtol / _atol / _stol / _divtol or _max_it option with no value, a negative or infinite number, or a
-    Newton solve's ksp_rtol of 1 or more. A value that is no number is left to PETSc, whose message names it.
+    -qsc_*_rtol / _atol / _stol / _divtol or _max_it option with no value, a negative or infinite number, a
+    Newton solve's ksp_rtol of 1 or more, or its snes_max_it / ksp_max_it of 0. A value that is no number is left to PETSc, whose message names it.
     Needs no PETSc (qsc sweep checks its runs' values with it before the first)."""
     kind = re.search(r"_(rtol|atol|stol|divtol|max_it)$", name) if name.startswith(PREFIX) else None
     if kind is None:
@@ -198,6 +206,11 @@ def value_error(name, value):
         # took for a converged solve (the two cubes never moved, exit 0; hunt30_6)
         return (f"-{name}: must be below 1 (at {value} every linear solve stops before its first iteration), "
                 f"got {value!r}")
+    if name in (f"{PREFIX}snes_max_it", f"{PREFIX}ksp_max_it") and number == 0:
+        # no Newton step or no Krylov iteration: every try failed, 4 cutbacks and "DIVERGED_MAX_IT after 0
+        # iterations", exit 3 (session 33)
+        return f"-{name}: must be at least 1 (at 0 no {'Newton step' if 'snes' in name else 'Krylov iteration'} " \
+               f"is taken), got {value!r}"
     return None
 
 

@@ -1007,7 +1007,9 @@ class System:
         if not self._factors_with_mumps():
             return False
         pc = self.snes.getKSP().getPC()
-        F = pc.getFactorMatrix()
+        F = options.mumps_factor(pc)
+        if F is None:               # the try failed before its first factorization
+            return False
         error = F.getMumpsInfog(1)
         if error in MUMPS_MEMORY_ERRORS or (error in options.MUMPS_WORKSPACE_ERRORS and self.mumps_cap is not None):
             cap, lift = "", ""

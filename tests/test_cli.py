@@ -720,7 +720,8 @@ def test_a_viewer_option_with_a_bad_value_is_an_input_error(tmp_path, option, ho
 
 
 @pytest.mark.parametrize("case", ["rtol 1", "atol above", "minres", "no cholesky", "value-less", "viewer file",
-                                  "preonly jacobi", "no tolerance", "log_view file"])
+                                  "preonly jacobi", "no tolerance", "log_view file",
+                                  "no newton step"])
 def test_solver_options_that_cannot_work_end_cleanly(tmp_path, case):
     """Options a PETSc user may try, each of which ended in a wrong answer with exit 0 or a traceback with exit 1
     (hunt30_6): -qsc_ksp_rtol 1 stops every linear solve before its first iteration, and the zero Newton steps
@@ -749,6 +750,8 @@ def test_solver_options_that_cannot_work_end_cleanly(tmp_path, case):
         "no tolerance": (["-qsc_ksp_max_it", "-qsc_ksp_monitor"], 2, "-qsc_ksp_max_it: needs an integer (no value"),
         # PetscFinalize still wrote the report and printed its error stack after the line (hunt32_3)
         "log_view file": (["-log_view", ":/nonexistent/f.txt"], 2, "a file that cannot be opened in -log_view"),
+        # every try failed: 4 cutbacks, then "DIVERGED_MAX_IT after 0 iterations", exit 3 (session 33)
+        "no newton step": (["-qsc_snes_max_it", "0"], 2, "-qsc_snes_max_it: must be at least 1 (at 0 no Newton step"),
     }[case]
     proc = subprocess.run([sys.executable, "-m", "qsc_petsc.cli", "run", str(CONFIGS / "block_compression.toml"),
                            "--out", str(tmp_path), *options], capture_output=True, text=True, timeout=120,

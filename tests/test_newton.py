@@ -444,6 +444,22 @@ def test_the_force_floor_is_the_softest_bodys(tmp_path):
     assert forces[0] == pytest.approx(forces[1], rel=1e-9)
 
 
+def test_a_mumps_pc_before_its_first_factorization():
+    """A try that failed before its first linear solve leaves a MUMPS PC without a factor, whose
+    PCFactorGetMatrix is PETSc error 58: the workspace and reset checks after a failed try read it as no failure."""
+    from qsc_petsc import options
+    ksp = PETSc.KSP().create(comm=PETSc.COMM_SELF)
+    ksp.setType("preonly")
+    pc = ksp.getPC()
+    pc.setType("lu")
+    pc.setFactorSolverType("mumps")
+    assert options.factored_by_mumps(pc)
+    assert options.mumps_factor(pc) is None
+    assert options.more_mumps_workspace(pc, options.PREFIX, set()) is None
+    assert not options.reset_failed_mumps(pc)
+    ksp.destroy()
+
+
 def test_a_failed_mumps_factor_is_made_anew():
     """PETSc skips the numeric factorization of a MUMPS factor whose last factorization failed, so the next solve
     called MUMPS with no factors (PETSc error 76, INFOG(1) = -3): a body pulled off the contact that held it ended
