@@ -15,7 +15,7 @@ def check(scene, comm):
     inserted = options.insert_options(scene.petsc)      # as the run would: the scene's, then the command line's
     try:
         options.check_options()
-        check_solver_options(comm)
+        check_solver_options(comm, scene.solver.contact_preconditioner if scene.contact else None)
         check_multigrid_alpha(scene)
     finally:
         options.remove_options(inserted)

@@ -332,13 +332,55 @@ def configure_snes(snes):
                          f"(the active set and the force residual); use one of {', '.join(NEWTON_TYPES)}")
 
 
-def check_solver_options(comm):
-    """What the run's solver set-up would say of the options database (collective): `qsc check`."""
+def missing_factor_error(exc):
+    """The SceneError for PETSc error 92 (MatGetFactor: no installed package provides the factorization asked
+    for), met at a preconditioner's first set-up on every rank."""
+    return SceneError("the PETSc options ask for a factorization that no installed package provides (PETSc error "
+                      f"92 in {petsc_detail(exc)}): check -qsc_pc_factor_mat_solver_type and "
+                      "-qsc_band_pc_factor_mat_solver_type")
+
+
+def _model_matrix(comm):
+    """A small SPD matrix on comm (two nodes of three dofs a rank: a chain of springs held at both ends), for
+    `qsc check` to set the run's preconditioner up on."""
+    n = 6
+    A = PETSc.Mat().createAIJ(((n, None), (n, None)), bsize=3, nnz=(3, 1), comm=comm)
+    r0, r1 = A.getOwnershipRange()
+    size = A.getSize()[0]
+    for i in range(r0, r1):
+        A.setValue(i, i, 2.0)
+        for j in (i - 3, i + 3):
+            if 0 <= j < size:
+                A.setValue(i, j, -1.0)
+    A.assemble()
+    return A
+
+
+def check_solver_options(comm, contact_preconditioner=None):
+    """What the run's solver set-up would say of the options database (collective): `qsc check`. The
+    preconditioner is also set up, on a small model matrix (_model_matrix), as the run would set it up:
+    with contact_preconditioner (a scene's solver.contact_preconditioner, given when it has contact pairs)
+    the band composite where the run would use it, so that a factorization package (-qsc_pc_factor_*,
+    -qsc_band_pc_factor_*) and the contact band's own options (-qsc_band_*) are met before the run. A
+    set-up that fails there for another reason is left to the run (a model matrix is not the run's)."""
     snes = new_snes(comm, 50)
+    A = None
     try:
         configure_snes(snes)
+        A = _model_matrix(comm)
+        ksp = snes.getKSP()
+        if contact_preconditioner is not None and preconditioner.wants_band(contact_preconditioner, True):
+            preconditioner.install_band_pc(ksp, np.arange(*A.getOwnershipRange(), dtype=PETSc.IntType), comm)
+        ksp.setOperators(A, A)
+        try:
+            ksp.setUp()
+        except PETSc.Error as exc:
+            if exc.ierr == PETSC_ERR_MISSING_FACTOR:
+                raise missing_factor_error(exc) from None
     finally:
         snes.destroy()
+        if A is not None:
+            A.destroy()
 
 
 class System:
@@ -911,9 +953,7 @@ class System:
                     self.snes.solve(None, u)
             except PETSc.Error as exc:     # on every rank: the reason is collective; a failed solve like any other
                 if exc.ierr == PETSC_ERR_MISSING_FACTOR:     # met at the first factorization, on every rank
-                    raise SceneError("the PETSc options ask for a factorization that no installed package "
-                                     f"provides (PETSc error 92 in {petsc_detail(exc)}): check "
-                                     "-qsc_pc_factor_mat_solver_type and -qsc_band_pc_factor_mat_solver_type") from None
+                    raise missing_factor_error(exc) from None
                 if exc.ierr in (56, 65) and "iewer" in petsc_detail(exc) and _all_failed(self.agree_comm):
                     # a viewer option read at the solve's end (-qsc_ksp_converged_reason true): the options'
                     # fault, as at set-up (options.set_from_options)

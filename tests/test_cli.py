@@ -449,10 +449,12 @@ def test_check_tries_the_solver_options(tmp_path):
     """qsc check said valid for PETSc options the run refuses at set-up (an unknown PC type, a SNES type whose
     stops qsc cannot check, from the command line or the scene; helper pass, session 25): it sets up the run's
     solver from the options and ends as the run would (exit 2, the same line)."""
-    for args in (["-qsc_pc_type", "bogus"], ["--set", "petsc.snes_type=ksponly"]):
+    for args in (["-qsc_pc_type", "bogus"], ["--set", "petsc.snes_type=ksponly"],
+                 # met at the preconditioner's set-up: on a model matrix (session 33)
+                 ["-qsc_pc_type", "cholesky", "-qsc_pc_factor_mat_solver_type", "superlu"]):
         code, out = qsc(["check", CONFIGS / "patch_test.toml", *args])
         assert code == 2 and own_lines(out)[-1].startswith("qsc: error: ") and (
-            "bogus" in out or "-qsc_snes_type ksponly" in out), out
+            "bogus" in out or "-qsc_snes_type ksponly" in out or "no installed package provides" in out), out
     code, out = qsc(["check", CONFIGS / "patch_test.toml", "-qsc_pc_type", "lu"])
     assert code == 0, out
 
@@ -779,15 +781,18 @@ def test_bad_band_option_ends_every_rank_with_exit_2(tmp_path, case):
     """A -qsc_band_* option PETSc refuses ends every rank with exit 2 and one error line: an unknown type is read
     at the search (read inside the solve's callbacks it crashed the other rank), a factorization no package
     provides is met at the first factorization (its half-built preconditioner crashed PETSc's finalization
-    until the failed run was destroyed before exit)."""
+    until the failed run was destroyed before exit). `qsc check` says the same: it sets the preconditioner up on
+    a model matrix (it passed them, hunt32_3)."""
     serial_only()
     option, expected, quoted = BAND_OPTIONS[case]
-    code, out = run_qsc(["run", CONFIGS / "two_cubes_dies.toml", "--out", tmp_path / "out", "-qsc_ksp_type", "gmres",
-                         "-qsc_pc_type", "hypre", *option], 2, tmp_path, 60.0)
-    assert code == 2, out
-    assert "Traceback" not in out and "SEGV" not in out, out
-    errors = [line for line in own_lines(out) if line.startswith("qsc: error: ")]
-    assert len(errors) == 1 and errors[0].startswith(expected) and quoted in errors[0], out
+    for command in (["run", CONFIGS / "two_cubes_dies.toml", "--out", tmp_path / "out"],
+                    ["check", CONFIGS / "two_cubes_dies.toml"]):
+        code, out = run_qsc([*command, "-qsc_ksp_type", "gmres", "-qsc_pc_type", "hypre", *option], 2, tmp_path,
+                            60.0)
+        assert code == 2, out
+        assert "Traceback" not in out and "SEGV" not in out, out
+        errors = [line for line in own_lines(out) if line.startswith("qsc: error: ")]
+        assert len(errors) == 1 and errors[0].startswith(expected) and quoted in errors[0], out
 
 
 def test_petsc_detail_quotes_the_innermost_routine_and_its_specifics():
