@@ -4,7 +4,9 @@ would model."""
 import numpy as np
 from mpi4py import MPI
 
-from .mesh import distribute_mesh
+from . import elasticity
+from .errors import MeshError
+from .mesh import distribute_mesh, on_all
 
 
 def check(scene, comm):
@@ -20,6 +22,14 @@ def check(scene, comm):
     finally:
         options.remove_options(inserted)
     mesh = distribute_mesh(scene, comm)
+
+    def cells_sound():
+        # the assembly's test, which check never reached: a flat tet passed as valid (hunt33_1)
+        try:
+            elasticity.check_cells(mesh.cell_type, mesh.coords, mesh.cells, mesh.cell_orig)
+        except elasticity.DegenerateCell as exc:
+            raise MeshError(f"{mesh.describe_cell(exc.cell)} is inverted or degenerate: {exc.detail}") from None
+    on_all(comm, cells_sound)
     cells = comm.gather(len(mesh.cells), root=0)
     owned = comm.gather(int(mesh.owned.sum()), root=0)
     ghosts = comm.gather(int((~mesh.owned).sum()), root=0)

@@ -113,6 +113,14 @@ def _gradients(cell_type, xe, xi, ids=None, weights=None):
     return np.ascontiguousarray(G), detJ
 
 
+def check_cells(cell_type, coords, cells, ids, batch=20000):
+    """Raise DegenerateCell for the first of cells (m, n) over coords whose det J is not positive beyond
+    round-off at a quadrature point: the assembly's test (_gradients), without the stiffness (`qsc check`)."""
+    xi = QUADRATURE[cell_type][0]
+    for a in range(0, len(cells), batch):
+        _gradients(cell_type, coords[cells[a:a + batch]], xi, ids[a:a + batch])
+
+
 def strain_displacement(cell_type, xe, xi):
     """Strain-displacement matrices B (m, nq, 6, 3n), eps = B u_e, and det J (m, nq) at reference points xi (nq, 3)."""
     xe = np.asarray(xe, float)

@@ -40,6 +40,7 @@ class GlobalMesh:
     cell_piece: np.ndarray = None   # (m,) connected piece (index into piece_names)
     piece_names: list = None    # a body's name, or "body piece k of n (around x, y, z)" for a body in pieces
     body_sources: list = None   # per body: (its first cell, "bodies[i] (name, what it was made from)")
+    unusable: dict = None       # "body.surface" -> why a mesh file's group of faces cannot be a surface
 
 
 @dataclass
@@ -245,6 +246,7 @@ def check_size(scene, comm, available=available_memory):
 def build_global_mesh(scene):
     """Generate or read every body and merge them into one vertex/cell numbering (rank 0)."""
     points, cells, bodies, masks, names, pieces, piece_names, sources = [], [], [], [], [], [], [], []
+    unusable = {}
     n_cells = 0
     offset, cell_types = 0, set()
     for b, body in enumerate(scene.bodies):
@@ -261,6 +263,7 @@ def build_global_mesh(scene):
         if len(cell_types) > 1:
             raise SceneError(f"bodies[{b}].mesh: all bodies must use one element type "
                              f"(found {sorted(cell_types)}); mixed hex/tet meshes are not supported")
+        unusable.update({f"{body.name}.{name}": why for name, why in bm.unusable.items()})
         mask = np.zeros((len(bm.cells), len(fem.CELL_FACES[bm.cell_type])), dtype=np.int64)
         for sname, cf in sorted(bm.surfaces.items()):
             bit = len(names)
@@ -290,7 +293,7 @@ def build_global_mesh(scene):
         offset += len(bm.points)
     return GlobalMesh(np.concatenate(points), np.concatenate(cells), cell_types.pop(),
                       np.concatenate(bodies), np.concatenate(masks), names, np.concatenate(pieces), piece_names,
-                      sources)
+                      sources, unusable)
 
 
 def _check_extent(index, spec, points):
@@ -303,9 +306,12 @@ def _check_extent(index, spec, points):
                     f"extent must lie between {MIN_EXTENT:g} and {MAX_EXTENT:g} (areas and stiffnesses take its powers)")
 
 
-def check_surface_references(scene, surface_names):
-    """Every surface named by a boundary condition, contact pair or die must exist in the mesh."""
+def check_surface_references(scene, surface_names, unusable=None):
+    """Every surface named by a boundary condition, contact pair or die must exist in the mesh; unusable: {"body.
+    surface": why} of a mesh file's groups of faces that cannot be surfaces (named only where a scene uses one)."""
     def check(key, ref):
+        if ref in (unusable or {}):
+            raise SceneError(f"{key}: surface {ref!r} of the mesh file cannot be used: {unusable[ref]}")
         if ref not in surface_names:
             body = ref.split(".")[0]
             known = sorted(s.split(".", 1)[1] for s in surface_names if s.split(".")[0] == body)
@@ -338,10 +344,10 @@ def distribute_mesh(scene, comm):
     check_size(scene, comm)
     gm = on_root(comm, lambda: build_global_mesh(scene))
     header = comm.bcast((gm.cell_type, gm.surface_names, len(gm.points), len(gm.cells), gm.piece_names,
-                         gm.body_sources)
+                         gm.body_sources, gm.unusable)
                         if comm.rank == 0 else None, root=0)
-    cell_type, surface_names, n_vertices, n_cells, piece_names, body_sources = header
-    check_surface_references(scene, surface_names)
+    cell_type, surface_names, n_vertices, n_cells, piece_names, body_sources, unusable = header
+    check_surface_references(scene, surface_names, unusable)
     nn = fem.CELL_NODES[cell_type]
     nf = len(fem.CELL_FACES[cell_type])
 

@@ -55,6 +55,8 @@ class BodyMesh:
     cells: np.ndarray                  # (m, 8) hex or (m, 4) tet, int64
     cell_type: str                     # "hex" | "tet"
     surfaces: dict[str, np.ndarray] = field(default_factory=dict)  # name -> (k, 2) int64 (cell, local face)
+    # a mesh file's groups of faces that cannot be surfaces, name -> why: an error only where a scene names one
+    unusable: dict[str, str] = field(default_factory=dict)
 
 
 def rotation_matrix(rotation_degrees):
@@ -186,12 +188,46 @@ def _orient(cell_type, points, cells):
     return cells
 
 
-def _named_facets(mesh):
-    """Surface groups of a meshio mesh: {name: [(meshio cell type, facet node array), ...]}."""
+def _gmsh_format(path):
+    """(version, binary, data size) from a gmsh file's $MeshFormat header, or None for another file."""
+    try:
+        with open(path, "rb") as f:
+            if f.readline().strip() != b"$MeshFormat":
+                return None
+            version, binary, size = f.readline().split()[:3]
+            return version.decode(), binary == b"1", int(size)
+    except (OSError, ValueError):
+        return None
+
+
+def _gmsh41_surface_groups(path, binary, data_size):
+    """{entity tag: [physical tags]} of the surface entities of a gmsh 4.1 file, read from its $Entities
+    section with meshio's own reader of it; None when the file has none. meshio's mesh keeps an entity's
+    first physical tag alone (`gmsh:physical`), so a face in two groups went to the first one only: an
+    unnamed group lost the top face it shared with a named one, whose pressure then never applied (exit 0;
+    hunt33_1)."""
+    from meshio.gmsh._gmsh41 import _read_entities
+    with open(path, "rb") as f:
+        for line in f:
+            if line.strip() == b"$Entities":
+                return _read_entities(f, not binary, data_size)[0][2]
+    return None
+
+
+def _named_facets(mesh, entity_groups=None):
+    """Surface groups of a meshio mesh: {name: [(meshio cell type, facet node array), ...]}. entity_groups: a
+    gmsh 4.1 file's {surface entity: [physical tags]} (_gmsh41_surface_groups), which meshio's
+    `gmsh:physical` cuts to the first tag."""
     groups = {}
+    names = {int(v[0]): k for k, v in mesh.field_data.items() if len(v) > 1 and int(v[1]) == 2}
+    entities = mesh.cell_data.get("gmsh:geometrical")
     tags = mesh.cell_data.get("gmsh:physical")
-    if tags is not None:
-        names = {int(v[0]): k for k, v in mesh.field_data.items() if len(v) > 1 and int(v[1]) == 2}
+    if entity_groups is not None and entities is not None:
+        for block, e in zip(mesh.cells, entities):
+            if block.dim == 2 and len(e):
+                for tag in entity_groups.get(int(e[0]), ()):
+                    groups.setdefault(names.get(int(tag), f"surface{tag}"), []).append((block.type, block.data))
+    elif tags is not None:
         for block, t in zip(mesh.cells, tags):
             if block.dim == 2:
                 for tag in np.unique(t):
@@ -215,6 +251,11 @@ def read_mesh_file(path, scale=1.0):
     import meshio  # only needed here
 
     # meshio prints a failed reader's reason and then calls sys.exit: capture both
+    gmsh = _gmsh_format(path)
+    if gmsh is not None and gmsh[0].startswith("4") and gmsh[0] != "4.1":
+        # meshio reads 4.1 and 2.2: 4.0 failed with "not enough values to unpack" (hunt33_1)
+        raise MeshError(f"cannot read mesh file {path}: gmsh's format {gmsh[0]} is not read; save it as 4.1 or 2.2 "
+                        f"(Mesh.MshFileVersion)")
     printed = io.StringIO()
     try:
         with redirect_stdout(printed), redirect_stderr(printed):
@@ -224,6 +265,9 @@ def read_mesh_file(path, scale=1.0):
             reason = " ".join(s.strip() for s in printed.getvalue().splitlines() if s.strip())
         else:
             reason = " ".join(f"{type(e).__name__}: {e}".split())
+        if "Incompatible cell data 'gmsh:physical'" in reason:
+            reason += (" (elements outside every physical group, as gmsh's Mesh.SaveAll = 1 writes them, which "
+                       "meshio cannot read beside the groups: save without it)")
         raise MeshError(f"cannot read mesh file {path}: {reason}") from None
     if printed.getvalue().strip():
         sys.stdout.write(printed.getvalue())  # meshio's warnings on a successful read
@@ -264,16 +308,23 @@ def read_mesh_file(path, scale=1.0):
                         f"{', '.join(str(i) for i in index[face // len(table)])} (0-based, in the file's order) "
                         f"share the face of points {sorted(int(v) for v in nodes)}")
     boundary = _faces_held(cell_type, count, 1)
-    groups = _named_facets(mesh)
+    groups = _named_facets(mesh, _gmsh41_surface_groups(path, *gmsh[1:]) if gmsh and gmsh[0] == "4.1" else None)
     if "boundary" in groups:
         raise MeshError(f"mesh file {path}: surface name 'boundary' is reserved for all boundary faces")
-    names, facets = list(groups), []
-    for name in names:
-        for ftype, data in groups[name]:
-            if ftype != FACET_TYPES[cell_type]:
-                raise MeshError(f"mesh file {path}: surface {name!r} has {ftype} facets, "
-                                f"but {mtype} cells have {FACET_TYPES[cell_type]} faces")
-        facets.append(np.concatenate([d for _, d in groups[name]]).astype(np.int64))
+    # a group that cannot be a surface stops the run only if the scene names it (an unused interior group of a
+    # gmsh model made the whole file unreadable; hunt33_1)
+    unusable = {name: f"the file names it (physical group {int(v[0])}) but no face of it is in the file (an empty "
+                      f"group, or gmsh's Mesh.SaveAll = 1, which writes every element outside its groups)"
+                for name, v in mesh.field_data.items()
+                if len(v) > 1 and int(v[1]) == 2 and name not in groups and name != "boundary"}
+    names, facets = [], []
+    for name, per_block in groups.items():
+        wrong = sorted({ftype for ftype, _ in per_block if ftype != FACET_TYPES[cell_type]})
+        if wrong:
+            unusable[name] = f"it has {', '.join(wrong)} facets, but {mtype} cells have {FACET_TYPES[cell_type]} faces"
+            continue
+        names.append(name)
+        facets.append(np.concatenate([d for _, d in per_block]).astype(np.int64))
     # join facets to boundary faces by their sorted node tuples
     bnodes = fem.cell_faces(cell_type, cells[boundary[:, 0]], boundary[:, 1])
     rows = np.sort(np.concatenate([bnodes] + facets), axis=1)
@@ -286,12 +337,12 @@ def read_mesh_file(path, scale=1.0):
         h = hit[start:start + len(f)]
         start += len(f)
         if (h < 0).any():
-            raise MeshError(f"mesh file {path}: surface {name!r}: {(h < 0).sum()} of {len(h)} facets "
-                            f"are not boundary faces of the {mtype} cells")
+            unusable[name] = f"{(h < 0).sum()} of {len(h)} of its facets are not boundary faces of the {mtype} cells"
+            continue
         surfaces[name] = boundary[np.unique(h)]
     surfaces["boundary"] = boundary
 
     used = np.unique(cells)
     renumber = np.full(len(points), -1, np.int64)
     renumber[used] = np.arange(len(used))
-    return BodyMesh(points[used] * scale, renumber[cells], cell_type, surfaces)
+    return BodyMesh(points[used] * scale, renumber[cells], cell_type, surfaces, unusable)

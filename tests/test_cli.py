@@ -201,6 +201,16 @@ def _degenerate_file_cell(tmp):
         "bodies[0] (blk, mesh file ", "cube.msh): tet 3 (0-based", "degenerate"]
 
 
+def _interior_file_surface(tmp):
+    # a group with a face inside the body is set aside when read, an error where a scene names it (hunt33_1)
+    box = box_mesh((0.0, 0.0, 0.0), (1.0, 1.0, 1.0), (2, 2, 2), "tet")
+    base = fem.cell_faces("tet", box.cells[box.surfaces["zmin"][:, 0]], box.surfaces["zmin"][:, 1])
+    write_gmsh(tmp / "cube.msh", box.points, box.cells, "tet", {"base": base, "mid": box.cells[:1, [1, 2, 3]]})
+    return [block_scene(tmp, mesh='type = "file", path = "cube.msh"', fixed="mid")], [
+        ("boundary[0].surface: surface 'blk.mid' of the mesh file cannot be used: 1 of 1 of its facets are not "
+         "boundary faces of the tetra cells")]
+
+
 def _unknown_set_path(tmp):
     return [block_scene(tmp), "--set", "solver.max_cutback=2"], ["solver.max_cutback", "unknown key"]
 
@@ -268,7 +278,7 @@ def _result_name_taken(tmp):
 
 
 BAD_INPUT = [_unknown_key, _wrong_type, _negative_modulus, _missing_mesh_file, _unknown_box_surface,
-             _unknown_file_surface, _not_a_mesh, _degenerate_file_cell, _unknown_set_path, _set_missing_entry, _unavailable_partitioner,
+             _unknown_file_surface, _interior_file_surface, _not_a_mesh, _degenerate_file_cell, _unknown_set_path, _set_missing_entry, _unavailable_partitioner,
              _shell_partitioner, _huge_box, _body_too_small, _pressure_not_finite, _pressure_out_of_range,
              _conflicting_boundaries, _negative_tolerance, _snes_without_newton_test, _result_name_taken]
 SERIAL_OK = {_unavailable_partitioner}     # cases that only fail in parallel
@@ -457,6 +467,14 @@ def test_check_tries_the_solver_options(tmp_path):
             "bogus" in out or "-qsc_snes_type ksponly" in out or "no installed package provides" in out), out
     code, out = qsc(["check", CONFIGS / "patch_test.toml", "-qsc_pc_type", "lu"])
     assert code == 0, out
+
+
+def test_check_finds_a_degenerate_cell(tmp_path):
+    """qsc check called a mesh with a flat tet valid, which the run refuses (the assembly's test; hunt33_1): it makes
+    the same test, with the run's line."""
+    args, expected = _degenerate_file_cell(tmp_path)
+    code, out = qsc(["check", *args])
+    assert code == 2 and all(e in own_lines(out)[-1] for e in expected), out
 
 
 # ---------------------------------------------------------------- failed solves

@@ -187,10 +187,71 @@ def test_cell_pieces_counts_unconnected_parts():
 
 
 def test_surface_facet_not_on_boundary(tmp_path):
+    """A group with faces inside the body cannot be a surface: it is set aside with the reason, an error only where a
+    scene names it (an unused interior group of a gmsh model made the whole file unreadable; hunt33_1)."""
     path = tmp_path / "interior.msh"
     _write_tet_mesh(path, "gmsh22", interior_facet=True)
-    with pytest.raises(MeshError, match="'left'.*not boundary faces"):
-        read_mesh_file(path)
+    mesh = read_mesh_file(path)
+    assert "left" not in mesh.surfaces and "top" in mesh.surfaces
+    assert mesh.unusable["left"] == "1 of 9 of its facets are not boundary faces of the tetra cells"
+
+
+def _gmsh_box(path, version, groups, save_all=False):
+    """A gmsh box [0, 1] x [0, 1] x [0, 0.5] of tets written as msh `version`; groups: (name or None, tag, sides)
+    physical groups of faces. Returns the number of faces on each side."""
+    gmsh = pytest.importorskip("gmsh")
+    gmsh.initialize()
+    try:
+        gmsh.option.setNumber("General.Terminal", 0)
+        volume = gmsh.model.occ.addBox(0, 0, 0, 1, 1, 0.5)
+        gmsh.model.occ.synchronize()
+        side = {}
+        for _, t in gmsh.model.getEntities(2):
+            c = gmsh.model.occ.getCenterOfMass(2, t)
+            side[["xmin", "xmax", "ymin", "ymax", "zmin", "zmax"][
+                int(np.argmin([abs(c[0]), abs(c[0] - 1), abs(c[1]), abs(c[1] - 1), abs(c[2]), abs(c[2] - 0.5)]))]] = t
+        for name, tag, sides in groups:
+            gmsh.model.addPhysicalGroup(2, [side[k] for k in sides], tag, name=name or "")
+        gmsh.model.addPhysicalGroup(3, [volume], 100, name="solid")
+        gmsh.option.setNumber("Mesh.MeshSizeMax", 0.25)
+        gmsh.option.setNumber("Mesh.MshFileVersion", version)
+        gmsh.option.setNumber("Mesh.SaveAll", int(save_all))
+        gmsh.model.mesh.generate(3)
+        faces = {k: len(gmsh.model.mesh.getElements(2, t)[1][0]) for k, t in side.items()}
+        gmsh.write(str(path))
+    finally:
+        gmsh.finalize()
+    return faces
+
+
+@pytest.mark.parametrize("version", [2.2, 4.1])
+def test_gmsh_groups_that_share_faces(tmp_path, version):
+    """A face in two physical groups belongs to both. meshio keeps a msh 4.1 entity's first group alone: an
+    unnamed group lost the top it shared with a named one, and a pressure on it never applied (exit 0; hunt33_1)."""
+    path = tmp_path / "box.msh"
+    faces = _gmsh_box(path, version, [("top", 1, ["zmax"]), (None, 20, ["zmax", "xmax"]),
+                                      ("skin", 2, ["xmin", "zmin", "zmax"])])
+    mesh = read_mesh_file(path)
+    counts = {name: len(rows) for name, rows in mesh.surfaces.items()}
+    assert counts["top"] == faces["zmax"]
+    assert counts["surface20"] == faces["zmax"] + faces["xmax"]
+    assert counts["skin"] == faces["xmin"] + faces["zmin"] + faces["zmax"]
+
+
+def test_gmsh_files_meshio_cannot_read_say_why(tmp_path):
+    """gmsh's Mesh.SaveAll = 1 in msh 4.1 made meshio fail with "Incompatible cell data", and msh 4.0 with "not enough
+    values to unpack"; in msh 2.2 it drops every group, and a scene naming one read "unknown surface" beside a file
+    that lists it (hunt33_1)."""
+    groups = [("top", 1, ["zmax"])]
+    _gmsh_box(tmp_path / "all41.msh", 4.1, groups, save_all=True)
+    with pytest.raises(MeshError, match=r"Incompatible cell data .*Mesh.SaveAll = 1"):
+        read_mesh_file(tmp_path / "all41.msh")
+    _gmsh_box(tmp_path / "v40.msh", 4.0, groups)
+    with pytest.raises(MeshError, match="gmsh's format 4 is not read; save it as 4.1 or 2.2"):
+        read_mesh_file(tmp_path / "v40.msh")
+    _gmsh_box(tmp_path / "all22.msh", 2.2, groups, save_all=True)
+    mesh = read_mesh_file(tmp_path / "all22.msh")
+    assert "top" not in mesh.surfaces and "Mesh.SaveAll = 1" in mesh.unusable["top"]
 
 
 def test_read_errors(tmp_path):
