@@ -235,6 +235,18 @@ def test_gap_closed_by_the_load():
     assert abs(S.penetration_ratio(res) - 1.0) <= 1e-6
 
 
+@pytest.mark.parametrize("formulation", FORMULATIONS)
+def test_gap_of_exactly_the_search_distance(formulation):
+    """An upper block one element (the default search distance) above the lower one, the gap closed in one step:
+    round-off kept or dropped each segment point at the reach's edge (24 % off with exit 0 on 1 rank, 12 % on 3,
+    none within reach on 2; hunt33_3). The reach is widened by model.REACH_SLACK: the touching answer."""
+    sc = S.scene(sets=["bodies.0.mesh.size=[1,1,0.3]", "bodies.0.mesh.cells=[10,10,2]", "bodies.1.mesh.origin=[0,0,0.4]",
+                       "bodies.1.mesh.cells=[8,8,2]", "contact.0.integration=segment",
+                       f"contact.0.formulation={formulation}"])
+    res = ok(S.measure(sc))
+    assert res["stress_error"] <= 1e-8
+
+
 def test_gap_that_stays_open():
     """A gap that the held upper block does not close: no contact force, no stress, the block translated."""
     res = ok(S.measure(special("gap 0.01 m, upper held by uz")[0]))
