@@ -9,6 +9,7 @@ later keeps what it had written.
 
 import json
 import os
+import textwrap
 from pathlib import Path
 
 import numpy as np
@@ -88,6 +89,7 @@ class ResultWriter:
         self.directory = Path(directory)
         self.enabled = write_xdmf
         self.steps = []
+        self.grids = {}          # step -> its grid in solution.xdmf's collection
         self.own_v = np.flatnonzero(mesh.owned)
         if not self.enabled:
             return
@@ -130,7 +132,8 @@ class ResultWriter:
                     h5[key] = data
             fields = [(center, name, data.shape) for (center, name), data in gathered.items()]
             self.steps = [s for s in self.steps if s[0] != step] + [(step, time, fields)]
-            self._write_xml()
+            self.grids[step] = self._grid(step, time, fields, "solution.h5")
+            self._write_xml(step, time, fields)
         write_on_root(self.comm, self.directory / "solution.h5", write)
 
     def _grid(self, step, time, fields, h5path, with_time=True):
@@ -153,16 +156,17 @@ class ResultWriter:
         lines.append("</Grid>")
         return "\n".join(lines)
 
-    def _write_xml(self):
+    def _write_xml(self, step, time, fields):
+        """solution.xdmf's collection of every step so far, and the new step's own file: the earlier steps' files
+        stand (each step rewrote them all: 250 steps of an 8-cell block spent 122 s writing, 0.46 s solving;
+        hunt33_2)."""
         head = '<?xml version="1.0"?>\n<Xdmf Version="3.0">\n<Domain>\n'
         tail = "\n</Domain>\n</Xdmf>\n"
-        grids = [self._grid(s, t, f, "solution.h5") for s, t, f in self.steps]
         _atomic_write(self.directory / "solution.xdmf",
                       head + '<Grid Name="load_steps" GridType="Collection" CollectionType="Temporal">\n'
-                      + "\n".join(grids) + "\n</Grid>" + tail)
-        for s, t, f in self.steps:
-            _atomic_write(self.directory / "steps" / f"step_{s:04d}.xdmf",
-                          head + self._grid(s, t, f, "../solution.h5", with_time=False) + tail)
+                      + "\n".join(self.grids[s] for s, _, _ in self.steps) + "\n</Grid>" + tail)
+        _atomic_write(self.directory / "steps" / f"step_{step:04d}.xdmf",
+                      head + self._grid(step, time, fields, "../solution.h5", with_time=False) + tail)
 
 
 def _atomic_write(path, text):
@@ -176,9 +180,23 @@ def _atomic_write(path, text):
         raise OSError(exc.errno, exc.strerror, str(path)) from None
 
 
-def write_json(path, data):
-    """Write JSON atomically (rank 0 only is the caller's business)."""
-    _atomic_write(Path(path), json.dumps(data, indent=2, default=_jsonable) + "\n")
+def write_json(path, data, steps_cache=None):
+    """Write JSON atomically (rank 0 only is the caller's business). steps_cache (a list, kept by the caller between
+    calls): data["steps"]'s records are encoded once, a finished step's record being final, so that a summary
+    written after every load step costs its new step's encoding, not every step's again (hunt33_2: 150 steps spent
+    5.7 s encoding). The text is json.dumps(data, indent=2)'s."""
+    steps = data.get("steps") if steps_cache is not None else None
+    if not isinstance(steps, list) or not steps:
+        _atomic_write(Path(path), json.dumps(data, indent=2, default=_jsonable) + "\n")
+        return
+    while steps_cache and (len(steps_cache) > len(steps) or steps_cache[-1][0] is not steps[len(steps_cache) - 1]):
+        steps_cache.pop()
+    for record in steps[len(steps_cache):]:
+        steps_cache.append((record, textwrap.indent(json.dumps(record, indent=2, default=_jsonable), "    ")))
+    mark = "\0steps\0"
+    text = json.dumps({**data, "steps": mark}, indent=2, default=_jsonable)
+    block = "[\n" + ",\n".join(t for _, t in steps_cache) + "\n  ]"
+    _atomic_write(Path(path), text.replace(json.dumps(mark), block, 1) + "\n")
 
 
 def _jsonable(x):

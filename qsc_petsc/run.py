@@ -207,6 +207,7 @@ class Run:
         path = self.out / "scene.resolved.toml"
         write_on_root(comm, path, lambda: path.write_text(scene.to_toml()))
         self.summary = self._summary_header()
+        self.steps_written = []     # summary.json's steps, encoded (output.write_json)
         self.write_summary()          # "running", from the end of the set-up on
 
     def _summary_header(self):
@@ -289,7 +290,7 @@ class Run:
         self.summary["time"] = self.phases.summary()
         self.summary["peak_memory_mib"] = peak_memory_mib(self.comm)
         path = self.out / "summary.json"
-        write_on_root(self.comm, path, lambda: write_json(path, self.summary))
+        write_on_root(self.comm, path, lambda: write_json(path, self.summary, self.steps_written))
 
     def execute(self):
         """Run every load step and return the summary; the scene's PETSc options leave the database when it
