@@ -53,6 +53,42 @@ def cell_materials(mesh, scene):
     return lame[mesh.cell_body, 0], lame[mesh.cell_body, 1]
 
 
+# material.volumetric = "full" warns from this Poisson's ratio on (flat_punch, coarse: the punch's force 1.13x its
+# nu = 0.3 value at 0.45, 1.34x at 0.49, 2.6x at 0.499 and 14x at 0.4999 on hexes; 1.41x at 0.49 on tets; hunt33_3)
+LOCKING_NU = 0.45
+
+
+def locking_warnings(scene, cell_type):
+    """Lines for the bodies whose elements lock in volume: Poisson's ratio at LOCKING_NU or more, integrated fully
+    (hexes without mean_dilatation, or linear tets, which have nothing else)."""
+    lines = []
+    for i, body in enumerate(scene.bodies):
+        nu = body.material.poissons_ratio
+        if nu < LOCKING_NU or body.material.volumetric == "mean_dilatation":
+            continue
+        cure = ('set bodies[{i}].material.volumetric = "mean_dilatation" (B-bar)' if cell_type == "hex" else
+                "linear tetrahedra have no cure here: mesh the body with hexahedra and mean_dilatation")
+        lines.append(f"bodies[{i}] ({body.name}): Poisson's ratio {nu:g} with fully integrated "
+                     f"{'hexahedra' if cell_type == 'hex' else 'linear tetrahedra'}, which lock in volume: "
+                     f"the body answers too stiff wherever its strain is not uniform (a punch's force 1.3x at nu "
+                     f"0.49, 2.6x at 0.499 on hexes); " + cure.format(i=i))
+    return lines
+
+
+def cell_mean_bulk(mesh, scene):
+    """The bulk modulus lmbda + 2 mu / 3 [Pa] of every local cell whose body takes its volumetric energy with the
+    cell's mean dilatation (material.volumetric = "mean_dilatation": B-bar), 0 for the others; None when no body
+    does (every kernel then integrates fully, as before)."""
+    if all(b.material.volumetric == "full" for b in scene.bodies):
+        return None
+    bulk = np.zeros(len(scene.bodies))
+    for i, b in enumerate(scene.bodies):
+        if b.material.volumetric == "mean_dilatation":
+            lmbda, mu = elasticity.lame(b.material.youngs_modulus, b.material.poissons_ratio)
+            bulk[i] = lmbda + 2.0 * mu / 3.0
+    return bulk[mesh.cell_body]
+
+
 def plain_rows(A):
     """Let A multiply with AIJ's plain row kernel instead of the i-node one (rows of identical pattern
     taken together), unless -mat_no_inode 0 says otherwise: on the 985k-dof box at 2 ranks, three runs
@@ -87,14 +123,15 @@ def _stiffness_operator(size, csr, comm, r0, fixed):
 BATCH = 1 << 19           # candidates (element blocks) summed per batch: ~40 MB of temporaries
 
 
-def stiffness_matrix(mesh, lmbda, mu, extra=None, fixed=None):
+def stiffness_matrix(mesh, lmbda, mu, extra=None, fixed=None, kappa=None):
     """The elastic stiffness K: a dof-space MPIAIJ matrix (block size 3) whose CSR arrays are built here.
 
     Rows are vertices (sparsity.py). Each rank sums its cells' element blocks into the rows it
     owns, sends the blocks of rows owned elsewhere to their owners, and hands PETSc its rows as
     split (diagonal | off-diagonal) CSR arrays, which PETSc uses without copying. The pattern is
     exact: no new nonzero may be added later. Element kernels run once per group of congruent
-    cells (elasticity.congruent_groups) and batch of rows. lmbda, mu: (local cells,) [Pa]. extra: None or
+    cells (elasticity.congruent_groups) and batch of rows. lmbda, mu: (local cells,) [Pa]; kappa: None or (local
+    cells,) [Pa], the bulk modulus each cell takes with its mean dilatation (cell_mean_bulk). extra: None or
     (rows, cols, bits) as lattice_stiffness_matrix takes it: the blocks are held whole. fixed: None, or
     (owned dofs, values) of the Dirichlet conditions: then (K0, lifting) (_stiffness_operator)."""
     comm = mesh.comm
@@ -126,10 +163,10 @@ def stiffness_matrix(mesh, lmbda, mu, extra=None, fixed=None):
     layout = sparsity.split_layout(pattern, v0, v1)
 
     def local_sums():
-        groups = elasticity.congruent_groups(mesh.coords[mesh.cells], lmbda, mu)
+        groups = elasticity.congruent_groups(mesh.coords[mesh.cells], lmbda, mu, kappa)
         last = _last_rows(cell_rows, groups[1], len(groups[0]), o0)
-        vals, cols = _owned_sums(mesh, pattern, entries, layout, groups, lmbda, mu, last)
-        return vals, cols, _row_sums(mesh, ghost_pat, entries, groups, lmbda, mu)
+        vals, cols = _owned_sums(mesh, pattern, entries, layout, groups, (lmbda, mu, kappa), last)
+        return vals, cols, _row_sums(mesh, ghost_pat, entries, groups, (lmbda, mu, kappa))
     vals, cols, ghost_vals = on_all(comm, local_sums)       # a degenerate cell fails every rank
     received = send_to_owners(comm, starts, ghost_row, ghost_col, *ghost_vals.reshape(-1, 9).T)
     _add_received(pattern, layout, vals, v0, received[0], received[1], np.column_stack(received[2:]))
@@ -368,16 +405,16 @@ def _box_rows(mesh, lattices):
     return T, P, tid, gcol, valid
 
 
-def _row_sums(mesh, pattern, entries, groups, lmbda, mu):
+def _row_sums(mesh, pattern, entries, groups, moduli):
     """Summed element blocks (nnzb, 3, 3) of every block of a pattern, batch by batch of rows."""
     out = np.empty((len(pattern.col), 3, 3))
     for r0, r1 in sparsity.row_batches(pattern.cptr, BATCH):
         p0, p1 = pattern.rowptr[r0], pattern.rowptr[r1]
-        out[p0:p1] = _batch_sums(mesh, pattern, entries, r0, r1, groups, lmbda, mu).reshape(-1, 3, 3)
+        out[p0:p1] = _batch_sums(mesh, pattern, entries, r0, r1, groups, moduli).reshape(-1, 3, 3)
     return out
 
 
-def _owned_sums(mesh, pattern, entries, layout, groups, lmbda, mu, last):
+def _owned_sums(mesh, pattern, entries, layout, groups, moduli, last):
     """Split CSR values and point columns of the owned rows: (vals, cols) in one array each.
 
     Consecutive rows with the same number of blocks, all in the diagonal part, are copied as one
@@ -388,9 +425,9 @@ def _owned_sums(mesh, pattern, entries, layout, groups, lmbda, mu, last):
     v0 = mesh.vertex_range[0]
     nb = np.diff(pattern.rowptr)
     plain = (n_diag == nb) & (n_left == 0)
-    cache = _KernelCache(mesh, groups, lmbda, mu, last)
+    cache = _KernelCache(mesh, groups, moduli, last)
     for r0, r1 in sparsity.row_batches(pattern.cptr, BATCH):
-        V = _batch_sums(mesh, pattern, entries, r0, r1, groups, lmbda, mu, cache)        # (blocks of the batch, 9)
+        V = _batch_sums(mesh, pattern, entries, r0, r1, groups, moduli, cache)        # (blocks of the batch, 9)
         q0 = pattern.rowptr[r0]
         runs = sparsity.equal_runs(nb[r0:r1], plain[r0:r1], r0)
         for a, b in runs:
@@ -410,7 +447,7 @@ def _owned_sums(mesh, pattern, entries, layout, groups, lmbda, mu, last):
     return vals, cols
 
 
-def _batch_sums(mesh, pattern, entries, r0, r1, groups, lmbda, mu, cache=None):
+def _batch_sums(mesh, pattern, entries, r0, r1, groups, moduli, cache=None):
     """Summed element blocks (nb, 9) of the blocks of rows r0:r1 (row-major 3x3), kernels run once per
     congruent group (and, with a _KernelCache, once per run of batches needing it).
 
@@ -434,7 +471,7 @@ def _batch_sums(mesh, pattern, entries, r0, r1, groups, lmbda, mu, cache=None):
     slot[reps] = np.arange(len(reps))
     # T channel by channel (PETSc's dense matrices are column-major); its last row is the zero of extra columns
     table = np.zeros((9, len(reps) * kk + 1))
-    (cache or _KernelCache(mesh, groups, lmbda, mu)).fill(table[:, :-1].reshape(9, len(reps), kk), reps, r1)
+    (cache or _KernelCache(mesh, groups, moduli)).fill(table[:, :-1].reshape(9, len(reps), kk), reps, r1)
     ids = np.where(src >= 0, slot[g] * kk + (entry - cell * k) * k + src % k, len(reps) * kk).astype(PETSc.IntType)
     indptr = np.append(pattern.first[p0:p1] - c0, c1 - c0).astype(PETSc.IntType)
     S = PETSc.Mat().createAIJWithArrays((p1 - p0, table.shape[1]), (indptr, ids, np.ones(len(ids))),
@@ -453,8 +490,10 @@ class _KernelCache:
 
     last[g]: the last pattern row whose batch needs group g (None: keep nothing)."""
 
-    def __init__(self, mesh, groups, lmbda, mu, last=None):
-        self.mesh, self.groups, self.lmbda, self.mu, self.last = mesh, groups, lmbda, mu, last
+    def __init__(self, mesh, groups, moduli, last=None):
+        # moduli: (lmbda, mu, kappa) of the local cells (kappa: None, or each cell's mean-dilatation bulk modulus)
+        self.mesh, self.groups, self.last = mesh, groups, last
+        self.lmbda, self.mu, self.kappa = moduli
         k = mesh.cells.shape[1]
         self.ids, self.kept = np.zeros(0, np.int64), np.zeros((9, 0, k * k))
 
@@ -466,7 +505,8 @@ class _KernelCache:
         c = self.groups[0][reps[~hit]]
         try:
             Ke = elasticity.stiffness(mesh.cell_type, mesh.coords[mesh.cells[c]], self.lmbda[c], self.mu[c],
-                                      share_translates=False, ids=mesh.cell_orig[c])
+                                      share_translates=False, ids=mesh.cell_orig[c],
+                                      kappa=None if self.kappa is None else self.kappa[c])
         except elasticity.DegenerateCell as exc:      # named where the user can find it: body, file, cell there
             raise MeshError(f"{mesh.describe_cell(exc.cell)} is inverted or degenerate: {exc.detail}") from None
         out[:, ~hit] = Ke.reshape(-1, k, 3, k, 3).transpose(2, 4, 0, 1, 3).reshape(9, -1, k * k)
@@ -515,7 +555,7 @@ def _rank_in_row(pattern, row, cols):
     return t
 
 
-def internal_force(mesh, u_local, lmbda, mu, which=None):
+def internal_force(mesh, u_local, lmbda, mu, which=None, kappa=None):
     """Element-by-element K u (local, ghosted dof array): reactions need K before constraints.
 
     which: None, every local cell; or the indices of the cells to sum, so that the entries of a vertex all of
@@ -525,13 +565,15 @@ def internal_force(mesh, u_local, lmbda, mu, which=None):
     cells = mesh.cells if which is None else mesh.cells[which]
     if which is not None:
         lmbda, mu = lmbda[which], mu[which]
+        kappa = None if kappa is None else kappa[which]
     m, k = cells.shape
     ue = u_local.reshape(-1, 3)[cells].reshape(m, 3 * k)
     xe = mesh.coords[cells]
-    first, group = elasticity.congruent_groups(xe, lmbda, mu) if m else (np.zeros(0, np.int64),) * 2
+    first, group = elasticity.congruent_groups(xe, lmbda, mu, kappa) if m else (np.zeros(0, np.int64),) * 2
     fe = np.empty_like(ue)
     if len(first) <= FEW_GROUPS:
-        Kg = elasticity.stiffness(mesh.cell_type, xe[first], lmbda[first], mu[first], share_translates=False)
+        Kg = elasticity.stiffness(mesh.cell_type, xe[first], lmbda[first], mu[first], share_translates=False,
+                                  kappa=None if kappa is None else kappa[first])
         for g, Ke in enumerate(Kg):
             sel = np.flatnonzero(group == g)
             fe[sel] = ue[sel] @ Ke.T
@@ -541,7 +583,8 @@ def internal_force(mesh, u_local, lmbda, mu, which=None):
         share = len(first) <= m // 2
         for s in range(0, m, CHUNK):
             c = slice(s, s + CHUNK)
-            Kc = elasticity.stiffness(mesh.cell_type, xe[c], lmbda[c], mu[c], share_translates=share)
+            Kc = elasticity.stiffness(mesh.cell_type, xe[c], lmbda[c], mu[c], share_translates=share,
+                                      kappa=None if kappa is None else kappa[c])
             fe[c] = np.einsum("mij,mj->mi", Kc, ue[c])
     ldofs = 3 * cells[:, :, None] + np.arange(3)
     return np.bincount(ldofs.ravel(), fe.ravel(), minlength=3 * len(mesh.coords))

@@ -68,5 +68,7 @@ def check(scene, comm):
         lines.append(f"  rank {r}: {cells[r]} cells, {3 * owned[r]} owned dofs, {ghosts[r]} ghost vertices")
     lines.append(f"  balance (max/mean owned dofs): {max(owned) / max(np.mean(owned), 1):.3f}")
     lines.append(f"load steps: {scene.load.steps}; boundary conditions: {len(scene.boundary)}")
+    from .assembly import locking_warnings
+    lines.extend(f"warning: {line}" for line in locking_warnings(scene, mesh.cell_type))
     lines.extend(plan)
     return "\n".join(lines)

@@ -130,15 +130,16 @@ def strain_displacement(cell_type, xe, xi):
     return B.reshape(m, nq, 6, 3 * n), detJ
 
 
-def _stiffness_into(cell_type, xe, lmbda, mu, K, ids):
-    """Write the stiffness of cells xe (c, n, 3) with Lame parameters lmbda, mu (c,) into K (c, 3n, 3n).
+def _stiffness_into(cell_type, xe, lmbda, mu, K, ids, kappa=None):
+    """Write the stiffness of cells xe (c, n, 3) with Lame parameters lmbda, mu (c,) into K (c, 3n, 3n); kappa (c,) or
+    None: the bulk modulus whose energy a cell takes with its mean dilatation (0: at every point, full integration).
 
     With G_ai = d N_a / d x_i and H_aibj = int G_ai G_bj dV, the isotropic stiffness is
     K_aibj = lmbda H_aibj + mu (H_ajbi + delta_ij H_akbk): one rank-nq product per cell, a
     sixth of the work of B^T D B.
     """
     xi, w = QUADRATURE[cell_type]
-    Gw, _ = _gradients(cell_type, xe, xi, ids, weights=w)
+    Gw, detJ = _gradients(cell_type, xe, xi, ids, weights=w)
     c, nq, n, _ = Gw.shape
     Gw = Gw.reshape(c, nq, 3 * n)
     H = np.matmul(Gw.transpose(0, 2, 1), Gw)
@@ -150,6 +151,18 @@ def _stiffness_into(cell_type, xe, lmbda, mu, K, ids):
     K5 = K.reshape(c, n, 3, n, 3)
     for i in range(3):
         K5[:, :, i, :, i] += trace
+    if kappa is not None and kappa.any():
+        # mean dilatation (B-bar): the volumetric energy kappa (div u)^2 / 2 taken with the cell's mean div u, b u / V,
+        # instead of at each point (H_aibj is the integral of d N_a/d x_i d N_b/d x_j: div u's own term)
+        b, volume = _mean_divergence(Gw, detJ, w)
+        K += (kappa / volume)[:, None, None] * (b[:, :, None] * b[:, None, :]) - kappa[:, None, None] * H
+
+
+def _mean_divergence(Gw, detJ, w):
+    """b (c, 3n), the integral of d N_a / d x_i over each cell (so that the cell's mean div u is b u / V), and V (c,),
+    from the weighted gradients Gw (c, nq, 3n) = G sqrt(w det J) and det J (c, nq)."""
+    root = np.sqrt(w * detJ)
+    return np.einsum("cqk,cq->ck", Gw, root), (w * detJ).sum(axis=1)
 
 
 def _swap_ij(n):
@@ -157,8 +170,8 @@ def _swap_ij(n):
     return np.arange(9 * n * n).reshape(n, 3, n, 3).transpose(0, 3, 2, 1).ravel()
 
 
-def congruent_groups(xe, lmbda, mu):
-    """Group cells (m, n, 3) that are translates of one another and have the same lmbda, mu (m,) [Pa].
+def congruent_groups(xe, lmbda, mu, kappa=None):
+    """Group cells (m, n, 3) that are translates of one another and have the same lmbda, mu (and kappa) (m,) [Pa].
 
     Returns (first, group): one representative cell per group and the group of every cell. Node
     offsets from node 0 are rounded to 2^-40 of the power of two just above the cell's extent,
@@ -168,11 +181,12 @@ def congruent_groups(xe, lmbda, mu):
     m = len(xe)
     rel = (xe[:, 1:] - xe[:, :1]).reshape(m, 3 * (xe.shape[1] - 1))
     _, exponent = np.frexp(np.abs(rel).max(axis=1, initial=0.0))
-    keys = np.empty((m, rel.shape[1] + 3), np.int64)
+    moduli = (lmbda, mu) if kappa is None else (lmbda, mu, kappa)
+    keys = np.empty((m, rel.shape[1] + 1 + len(moduli)), np.int64)
     np.rint(rel / np.ldexp(1.0, exponent - 40)[:, None], out=rel)
-    keys[:, :-3] = rel
-    keys[:, -3] = exponent
-    for j, p in ((-2, lmbda), (-1, mu)):      # the bits: equal keys mean equal moduli
+    keys[:, :rel.shape[1]] = rel
+    keys[:, rel.shape[1]] = exponent
+    for j, p in enumerate(moduli, start=rel.shape[1] + 1):      # the bits: equal keys mean equal moduli
         keys[:, j] = np.ascontiguousarray(np.broadcast_to(np.asarray(p, float), (m,))).view(np.int64)
     # hash rows to one integer (wrapping multiply-add), then verify: a collision falls back to a row-wise unique
     mult = np.random.default_rng(12345).integers(1, 2**62, keys.shape[1], dtype=np.int64)
@@ -182,29 +196,33 @@ def congruent_groups(xe, lmbda, mu):
     return first, group.reshape(-1)
 
 
-def stiffness(cell_type, xe, lmbda, mu, share_translates=True, ids=None):
+def stiffness(cell_type, xe, lmbda, mu, share_translates=True, ids=None, kappa=None):
     """Element stiffness matrices (m, 3n, 3n) of cells with node coordinates xe (m, n, 3).
 
-    lmbda, mu: Lame parameters (Pa), scalars or (m,). Cells that are translates of one another
-    (congruent_groups) with the same lmbda, mu share one computed K unless share_translates is
-    False. Raises MeshError naming the first cell with det J <= 0: ids[row] (default: its row).
+    lmbda, mu: Lame parameters (Pa), scalars or (m,); kappa: None, or the bulk modulus (Pa, scalar or (m,)) that a
+    cell takes with its mean dilatation (B-bar; 0 for a cell integrated fully). Cells that are translates of one
+    another (congruent_groups) with the same moduli share one computed K unless share_translates is False. Raises
+    MeshError naming the first cell with det J <= 0: ids[row] (default: its row).
     """
     xe = np.asarray(xe, float)
     m, n = xe.shape[:2]
     lmbda, mu = (np.ascontiguousarray(np.broadcast_to(np.asarray(p, float), (m,))) for p in (lmbda, mu))
+    if kappa is not None:
+        kappa = np.ascontiguousarray(np.broadcast_to(np.asarray(kappa, float), (m,)))
     ids = np.arange(m) if ids is None else np.asarray(ids)
     K = np.empty((m, 3 * n, 3 * n))
     if share_translates and m > 1:
-        first, group = congruent_groups(xe, lmbda, mu)
+        first, group = congruent_groups(xe, lmbda, mu, kappa)
         if len(first) <= m // 2:
             K_distinct = np.empty((len(first),) + K.shape[1:])
             for s in range(0, len(first), CHUNK):
                 c = first[s:s + CHUNK]
-                _stiffness_into(cell_type, xe[c], lmbda[c], mu[c], K_distinct[s:s + CHUNK], ids[c])
+                _stiffness_into(cell_type, xe[c], lmbda[c], mu[c], K_distinct[s:s + CHUNK], ids[c],
+                                None if kappa is None else kappa[c])
             return np.take(K_distinct, group, axis=0, out=K, mode="clip")  # "raise" would buffer out
     for s in range(0, m, CHUNK):
         c = np.arange(s, min(s + CHUNK, m))
-        _stiffness_into(cell_type, xe[c], lmbda[c], mu[c], K[s:s + CHUNK], ids[c])
+        _stiffness_into(cell_type, xe[c], lmbda[c], mu[c], K[s:s + CHUNK], ids[c], None if kappa is None else kappa[c])
     return K
 
 
@@ -219,8 +237,9 @@ def strain_energy(cell_type, xe, ue, lmbda, mu):
     return 0.5 * np.einsum("mqi,mqi,mq,q->m", eps[..., 0], sigma[..., 0], detJ, w)
 
 
-def cell_stress(cell_type, xe, ue, lmbda, mu, chunk=16384):
-    """Cauchy stress (m, 6), Voigt order, at each cell's reference centroid.
+def cell_stress(cell_type, xe, ue, lmbda, mu, chunk=16384, kappa=None):
+    """Cauchy stress (m, 6), Voigt order, at each cell's reference centroid; kappa (stiffness): a cell with kappa > 0
+    takes its mean dilatation's pressure (kappa times the cell's mean div u in place of div u there).
 
     Computed from the displacement gradient H = G^T u_e (G the shape-function gradients there) and the Voigt
     table, not from the strain-displacement matrix B (6 x 3n per cell): 100k distorted hexes, both chunked,
@@ -235,6 +254,18 @@ def cell_stress(cell_type, xe, ue, lmbda, mu, chunk=16384):
         H = np.matmul(G[:, 0].transpose(0, 2, 1), ue[c].reshape(-1, n, 3))      # H_kj = d u_j / d x_k
         eps = H.reshape(len(H), 9) @ _VOIGT_OF_GRADIENT                           # Voigt strain, as B u gives it
         out[c] = (elasticity_matrix(lmbda[c], mu[c]) @ eps[..., None])[..., 0]
+    if kappa is not None:
+        mean = np.flatnonzero(np.broadcast_to(np.asarray(kappa, float), (m,)) > 0)
+        kappa = np.broadcast_to(np.asarray(kappa, float), (m,))
+        xi, w = QUADRATURE[cell_type]
+        for s in range(0, len(mean), chunk):
+            c = mean[s:s + chunk]
+            Gw, detJ = _gradients(cell_type, xe[c], xi, weights=w)
+            b, volume = _mean_divergence(Gw.reshape(len(c), len(xi), 3 * n), detJ, w)
+            theta = np.einsum("ck,ck->c", b, ue[c]) / volume
+            G, _ = _gradients(cell_type, xe[c], np.atleast_2d(fem.CENTROID[cell_type]))
+            div = np.einsum("cak,cak->c", G[:, 0], ue[c].reshape(-1, n, 3))
+            out[c, :3] += (kappa[c] * (theta - div))[:, None]
     return out
 
 

@@ -260,6 +260,9 @@ def build_global_mesh(scene):
             bm = read_mesh_file(spec.path, spec.scale)
         _check_extent(b, spec, bm.points)
         cell_types.add(bm.cell_type)
+        if body.material.volumetric == "mean_dilatation" and bm.cell_type != "hex":
+            raise SceneError(f"bodies[{b}].material.volumetric: \"mean_dilatation\" is for hexahedra, and the body's "
+                             f"mesh is of linear tetrahedra, whose strain is one per cell (nothing to average)")
         if len(cell_types) > 1:
             raise SceneError(f"bodies[{b}].mesh: all bodies must use one element type "
                              f"(found {sorted(cell_types)}); mixed hex/tet meshes are not supported")

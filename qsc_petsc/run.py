@@ -163,6 +163,8 @@ class Run:
         with self.phases("mesh"):
             self.mesh = distribute_mesh(scene, comm)
         mesh = self.mesh
+        for line in assembly.locking_warnings(scene, mesh.cell_type):
+            self.log(f"warning: {line}")
         self.contact, extra, stencil_digests = None, None, []
         if scene.contact or scene.die:
             from .contact.model import ContactModel
@@ -173,6 +175,7 @@ class Run:
             extra, stencil_digests = self.contact.prepare(1.0 / scene.load.steps)
         with self.phases("assembly"):
             self.lmbda, self.mu = assembly.cell_materials(mesh, scene)
+            self.kappa = assembly.cell_mean_bulk(mesh, scene)
             # generated hex boxes read their rows from stencil templates; other meshes sum element blocks
             lattices = lattice.box_lattices(scene)
             self.stiffness_path = "box stencils" if lattices else "element blocks"
@@ -183,7 +186,7 @@ class Run:
             # K arrives as K0 with its lifting: the Dirichlet rows and columns go while its arrays are ours
             fixed = (self.bc_dofs, bc_values)
             K, lifting = (assembly.lattice_stiffness_matrix(mesh, lattices, extra, fixed) if lattices
-                          else assembly.stiffness_matrix(mesh, self.lmbda, self.mu, extra, fixed))
+                          else assembly.stiffness_matrix(mesh, self.lmbda, self.mu, extra, fixed, self.kappa))
             u = K.createVecRight()
             self.f_ext = assembly.surface_load(mesh, scene, u)
             held = [(surface, None if die.condition == "sticking" else np.asarray(die.normal, float))
@@ -253,7 +256,7 @@ class Run:
             return {}
         ul = self.local_displacement(u).ravel()
         fl = dm.createLocalVec()
-        fl.getArray()[:] = assembly.internal_force(mesh, ul, self.lmbda, self.mu, self.reaction_cells)
+        fl.getArray()[:] = assembly.internal_force(mesh, ul, self.lmbda, self.mu, self.reaction_cells, self.kappa)
         r = u.duplicate()
         r.set(0.0)
         dm.localToGlobal(fl, r, addv=PETSc.InsertMode.ADD_VALUES)
@@ -279,7 +282,8 @@ class Run:
         ul = self.local_displacement(u)
         k = mesh.cells.shape[1]
         ue = ul[mesh.cells].reshape(len(mesh.cells), 3 * k)
-        stress = elasticity.cell_stress(mesh.cell_type, mesh.coords[mesh.cells], ue, self.lmbda, self.mu)
+        stress = elasticity.cell_stress(mesh.cell_type, mesh.coords[mesh.cells], ue, self.lmbda, self.mu,
+                                        kappa=self.kappa)
         point = {"displacement": ul}
         cell = {"stress": stress, "von_mises": elasticity.von_mises(stress)[:, None],
                 "body": mesh.cell_body[:, None].astype(float),

@@ -207,3 +207,46 @@ def test_rigid_motions_strain_nothing(cell_type):
     for m in range(len(xe)):
         u = el.rigid_motions(xe[m] - [0.3, -0.2, 0.7]).reshape(6, -1)
         assert np.abs(K[m] @ u.T).max() <= 1e-12 * np.abs(K[m]).max()
+
+
+# ---------------------------------------------------------------- mean dilatation (B-bar)
+
+def test_mean_dilatation_keeps_the_patch_test_and_the_rigid_modes():
+    """B-bar changes nothing where the strain is uniform (the patch test: energy and stress as full integration),
+    keeps K symmetric with exactly the six rigid modes in its kernel, and shares translates as the full kernel does."""
+    xe = distorted_cells("hex", 6, seed=11)
+    kappa = LMBDA + 2.0 * MU / 3.0
+    K_full, K_mean = el.stiffness("hex", xe, LMBDA, MU), el.stiffness("hex", xe, LMBDA, MU, kappa=kappa)
+    rng = np.random.default_rng(12)
+    A = 1e-3 * rng.standard_normal((3, 3))
+    ue = affine_displacement(xe, A)     # no translation: its round-off in K u would be 1e-5 of the strain's energy
+    energy = [np.einsum("ma,mab,mb->m", ue, K, ue) for K in (K_full, K_mean)]
+    assert np.allclose(energy[1], energy[0], rtol=1e-10)
+    assert np.allclose(el.cell_stress("hex", xe, ue, LMBDA, MU, kappa=kappa), el.cell_stress("hex", xe, ue, LMBDA, MU),
+                       rtol=1e-9, atol=1e-9 * np.abs(el.cell_stress("hex", xe, ue, LMBDA, MU)).max())
+    scale = np.abs(K_mean).max()
+    assert np.allclose(K_mean, K_mean.transpose(0, 2, 1), atol=1e-13 * scale)
+    assert ((np.abs(np.linalg.eigvalsh(K_mean) / scale) < 1e-10).sum(axis=1) == 6).all()
+    translates = np.concatenate([xe[:1], xe[:1] + 1e-3])
+    assert np.allclose(el.stiffness("hex", translates, LMBDA, MU, kappa=kappa),
+                       el.stiffness("hex", translates, LMBDA, MU, kappa=kappa, share_translates=False), rtol=1e-12)
+
+
+def test_mean_dilatation_does_not_lock():
+    """A hex bent in its plane, u = (x z, 0, -x^2 / 2) about its centre: its divergence z averages to 0 over the cell.
+    Fully integrated, its energy grows with the bulk modulus as nu nears 0.5 (volumetric locking); with the cell's
+    mean dilatation it stays the shear energy, and the stress's pressure part is the mean dilatation's (0)."""
+    xe = (HEX_REF - 0.5)[None]
+    x, z = xe[0, :, 0], xe[0, :, 2]
+    ue = np.stack([x * z, 0 * x, -0.5 * x**2], axis=1).reshape(1, -1)
+    energies = {}
+    for nu in (0.3, 0.49, 0.4999):
+        lmbda, mu = el.lame(1.0, nu)
+        kappa = lmbda + 2.0 * mu / 3.0
+        for name, k in (("full", None), ("mean", kappa)):
+            K = el.stiffness("hex", xe, lmbda, mu, kappa=k)[0]
+            energies[name, nu] = 0.5 * ue[0] @ K @ ue[0]
+        sigma = el.cell_stress("hex", xe, ue, lmbda, mu, kappa=kappa)[0]
+        assert abs(sigma[:3].sum()) <= 1e-12 * np.abs(sigma).max(initial=1.0)
+    assert energies["full", 0.4999] > 100 * energies["full", 0.3]
+    assert energies["mean", 0.4999] < 1.5 * energies["mean", 0.3]

@@ -175,6 +175,48 @@ def test_poissons_ratio(nu, formulation):
         assert S.force_error(res) <= 1e-8
 
 
+@pytest.mark.parametrize("formulation", FORMULATIONS)
+def test_mean_dilatation_keeps_the_patch_test(formulation):
+    """B-bar hexes (material.volumetric = "mean_dilatation") at nu 0.4999 on non-matching meshes: the uniaxial
+    answer stays exact, as with full integration."""
+    mats = [f"bodies.{b}.material.{key}" for b in (0, 1) for key in ("poissons_ratio=0.4999",
+                                                                     "volumetric=mean_dilatation")]
+    res = ok(S.measure(S.scene(sets=S.cells(2, 3) + mats + [f"contact.0.formulation={formulation}",
+                                                            "contact.0.integration=segment"])))
+    assert res["stress_error"] <= 1e-8
+
+
+def test_mean_dilatation_does_not_lock_under_a_punch(tmp_path):
+    """configs/flat_punch.toml coarse: fully integrated hexes lock as nu nears 0.5 (the punch's force 2.6x its
+    nu = 0.3 value at 0.499, 14x at 0.4999; hunt33_3), which a warning says; with the cells' mean dilatation the
+    force tends to the incompressible one (2.70, 2.73, 2.73 N at 0.49, 0.499, 0.4999), with no warning."""
+    said = []
+    forces = {}
+    for nu in (0.3, 0.4999):
+        for volumetric in ("full", "mean_dilatation"):
+            sets = ["bodies.0.mesh.cells=[8,8,4]", "bodies.1.mesh.cells=[6,6,6]", "load.steps=1",
+                    "petsc.ksp_type=preonly", "petsc.pc_type=lu", "petsc.pc_factor_mat_solver_type=mumps"]
+            sets += [f"bodies.{b}.material.{key}" for b in (0, 1)
+                     for key in (f"poissons_ratio={nu}", f"volumetric={volumetric}")]
+            lines = []
+            run, summary = run_scene(CONFIGS / "flat_punch.toml", tmp_path / f"{nu}_{volumetric}", sets,
+                                     log=lines.append)
+            run.destroy()
+            forces[nu, volumetric] = summary["steps"][-1]["contact"]["contact[0] punch.zmin / block.zmax"][
+                "total_normal_force"]
+            said.append(any("lock in volume" in line for line in lines))
+    assert said == [False, False, True, False]
+    assert forces[0.4999, "full"] > 10 * forces[0.3, "full"]
+    assert forces[0.4999, "mean_dilatation"] < 1.2 * forces[0.3, "mean_dilatation"]
+
+
+def test_mean_dilatation_is_for_hexahedra(tmp_path):
+    from qsc_petsc.errors import SceneError
+    with pytest.raises(SceneError, match=r"bodies\[0\]\.material\.volumetric: \"mean_dilatation\" is for hexahedra"):
+        run_scene(CONFIGS / "block_compression.toml", tmp_path, ["bodies.0.mesh.element=tet",
+                                                                 "bodies.0.material.volumetric=mean_dilatation"])
+
+
 # ---------------------------------------------------------------- length units
 
 @pytest.mark.parametrize("case", FORMULATIONS + ["dies"])

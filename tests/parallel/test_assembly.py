@@ -25,6 +25,9 @@ CASES = {
     "hex two bodies, one rotated": ("two_cubes_dies.toml", TWO_BODIES, False),
     "tet two bodies, distorted": ("two_cubes_dies.toml", TWO_BODIES + ["bodies.0.mesh.element=tet",
                                                                        "bodies.1.mesh.element=tet"], True),
+    # B-bar in one body of two, the other integrated fully
+    "hex mean dilatation, distorted": ("two_cubes_dies.toml", TWO_BODIES + [
+        "bodies.1.material.volumetric=mean_dilatation"], True),
 }
 
 
@@ -33,11 +36,11 @@ def distort(x):
     return x + 0.04 * np.sin(np.column_stack([3 * x[:, 1] + 2 * x[:, 2], 4 * x[:, 2] + x[:, 0], 5 * x[:, 0]]))
 
 
-def dense_reference(mesh, lmbda, mu):
+def dense_reference(mesh, lmbda, mu, kappa=None):
     """The global stiffness as a dense array, summed element by element (all ranks get it)."""
     n = 3 * mesh.n_vertices
     K = np.zeros((n, n))
-    Ke = elasticity.stiffness(mesh.cell_type, mesh.coords[mesh.cells], lmbda, mu, share_translates=False)
+    Ke = elasticity.stiffness(mesh.cell_type, mesh.coords[mesh.cells], lmbda, mu, share_translates=False, kappa=kappa)
     dofs = (3 * mesh.gvert[mesh.cells][:, :, None] + np.arange(3)).reshape(len(Ke), 3 * mesh.cells.shape[1])
     for d, ke in zip(dofs, Ke):
         K[np.ix_(d, d)] += ke
@@ -76,8 +79,9 @@ def test_stiffness_matrix_equals_dense_assembly(comm, monkeypatch, case, batch):
     if distorted:
         mesh.coords = distort(mesh.coords)
     lmbda, mu = assembly.cell_materials(mesh, scene)
-    A = assembly.stiffness_matrix(mesh, lmbda, mu)
-    K = dense_reference(mesh, lmbda, mu)
+    kappa = assembly.cell_mean_bulk(mesh, scene)
+    A = assembly.stiffness_matrix(mesh, lmbda, mu, kappa=kappa)
+    K = dense_reference(mesh, lmbda, mu, kappa)
     rows, r0 = owned_dense(A, len(K))
     ref = K[r0:r0 + len(rows)]
     err = comm.allreduce(float(np.abs(rows - ref).max(initial=0.0)), op=MPI.MAX)
@@ -99,6 +103,8 @@ LATTICE_CASES = {
     "lines long enough for runs, planes of them": ("block_compression.toml", ["bodies.0.mesh.cells=[9,6,5]"]),
     "cut across z: the cut's rows in runs": ("block_compression.toml", ["bodies.0.mesh.cells=[9,4,27]"]),
     "two bodies, one rotated and stiffer": ("two_cubes_dies.toml", TWO_BODIES),
+    "two bodies, one with mean dilatation": ("two_cubes_dies.toml", TWO_BODIES + [
+        "bodies.0.material.volumetric=mean_dilatation"]),
 }
 
 
@@ -111,7 +117,7 @@ def test_box_stencils_equal_dense_assembly(comm, case):
     lattices = lattice.box_lattices(scene)
     assert lattices is not None
     A = assembly.lattice_stiffness_matrix(mesh, lattices)
-    K = dense_reference(mesh, *assembly.cell_materials(mesh, scene))
+    K = dense_reference(mesh, *assembly.cell_materials(mesh, scene), assembly.cell_mean_bulk(mesh, scene))
     rows, r0 = owned_dense(A, len(K))
     err = comm.allreduce(float(np.abs(rows - K[r0:r0 + len(rows)]).max(initial=0.0)), op=MPI.MAX)
     assert err <= 1e-13 * np.abs(K).max()
