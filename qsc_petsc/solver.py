@@ -42,6 +42,11 @@ AUGMENTED_ROUND_OFF = 10.0
 # set it, not another body's (hunt30_4: a free body moved 1e12 m set the first bound at 1.2 and the loop stopped
 # at the penalty's answer, 9.4 % off)
 AUGMENTED_ROUND_OFF_CAP = 1e-3
+# ... and a run whose updates a halved increment left as far says they stand on their round-off (lower the penalty)
+# when they change by at most this many times it: two_pass's over-constrained rows at alpha 1e8 stood at 250-400x
+# the estimate, beyond AUGMENTED_ROUND_OFF, and the message sent the user to more updates or a stiffer penalty,
+# which did nothing or worse (hunt33_3); a soft penalty's slow updates stand 1e6x and more above theirs
+AUGMENTED_STALL_NOISE = 1e4
 # the augmented Lagrangian: rows whose stiffness on their own node, against the elements' there, is below this
 # fraction of the term's largest keep no multiplier (ConstraintTerm.own_stiffness). Slivers of area past an edge
 # stand at 5e-7-5e-6 of the largest, every other row of the sliding cubes at 9e-4 or more (1e-2 or more but in
@@ -1188,8 +1193,10 @@ def _solve_enforced(system, step, t, start, augmented_max):
         if outer > augmented_max:          # augmented_max updates applied, and this one's test not met
             ok = False
             stats["snes_reason"] = "AUGMENTED_LAGRANGIAN_MAX_IT"
-            term, _, change, _ = max(steps, key=lambda step: step[2] / step[0].augmented_tolerance)
-            stats["multipliers_unsettled"] = (term.name, change, term.augmented_tolerance)
+            term, _, change, bound = max(steps, key=lambda step: step[2] / step[0].augmented_tolerance)
+            # the round-off estimate itself (bound is AUGMENTED_ROUND_OFF times it, capped)
+            stats["multipliers_unsettled"] = (term.name, change, term.augmented_tolerance,
+                                              bound / AUGMENTED_ROUND_OFF)
             break
         for term, new, _, _ in steps:
             term.lmbda = new
@@ -1321,13 +1328,21 @@ def solve_load_step(system, step, t_prev, t_target, u, update_terms, max_cutback
                        "correction (-qsc_ksp_atol above the residual, or -qsc_ksp_rtol near 1): lower them, or "
                        "leave them to qsc, which sets the Krylov stop below the Newton target")
             if stats["snes_reason"] == "AUGMENTED_LAGRANGIAN_MAX_IT":
-                name, change, tol = stats["multipliers_unsettled"]
+                name, change, tol, noise = stats["multipliers_unsettled"]
                 halving = (f"; a halved increment left them as far ({unsettled[-2]:.2g} before), so no more were "
                            f"tried" if stalled else "")
+                if stalled and change <= AUGMENTED_STALL_NOISE * noise:
+                    # a stiff penalty's updates that stand on their round-off (two_pass's over-constrained rows at
+                    # 25-40x the allowance, alpha 1e8 on the patch test): more updates or a stiffer penalty cannot
+                    # help, a softer one does (hunt33_3)
+                    cure = (f"they stand at {change / noise:.3g} x their round-off ({noise:.2g}: eps_n times the rows' "
+                            f"precision), which the updates cannot go below: lower {name}.penalty (the augmented "
+                            f"Lagrangian needs no stiff one), or use the penalty alone")
+                else:
+                    cure = (f"raise {name}.augmented_max_iterations, or its penalty (the updates converge the faster "
+                            f"the stiffer it is)")
                 why = (f"; the multipliers of {name} still changed by {change:.2g} (relative; its "
-                       f"augmented_tolerance {tol:g}) after {augmented_max} updates{halving}: raise "
-                       f"{name}.augmented_max_iterations, or its penalty (the updates converge the faster the "
-                       f"stiffer it is)")
+                       f"augmented_tolerance {tol:g}) after {augmented_max} updates{halving}: {cure}")
             if away:
                 why = (f"; {stats['out_of_reach']} within the die's reach, of faces turned away from it, went "
                        f"through it: {DIE_AWAY}")

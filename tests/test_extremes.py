@@ -30,6 +30,38 @@ def ok(res):
 
 # ---------------------------------------------------------------- penalty
 
+def test_runs_out_of_the_models_range_say_so(tmp_path):
+    """Runs that ended "ok" with no word (hunt33_3): a penalty so soft that the bodies overlap half an element (alpha 1,
+    p = 0.5 E; also 50 % strain, past the linear elasticity's range), and one so stiff that p / eps_n lies within
+    1000 eps |x| (alpha 1e10, p = 1e-3 E), whose reported penetrations are round-off (they read -2.5 to -6.2 p / eps_n).
+    The patch test as it stands says none of it."""
+    deep = "penetrate the other surface by up to 0.0714 m = 0.5 h_eff"
+    cases = {"soft": (["contact.0.penalty=1", "boundary.5.value=500"], [deep, "strains reach 0.5"]),
+             "stiff": (["contact.0.penalty=1e10", "boundary.5.value=1e-3"], ["within 1000 x the coordinates' precision"]),
+             "sound": ([], [])}
+    for name, (sets, expected) in cases.items():
+        lines = []
+        run, summary = run_scene(CONFIGS / "patch_test.toml", tmp_path / name, sets, log=lines.append)
+        run.destroy()
+        assert summary["status"] == "ok"
+        warnings = [line for line in lines if "warning" in line]
+        assert len(warnings) == len(expected) and all(any(e in w for w in warnings) for e in expected), lines
+
+
+def test_augmented_lagrangian_stalled_on_round_off_says_lower_the_penalty(tmp_path):
+    """two_pass's augmented Lagrangian at alpha 1e8 on the patch test: its over-constrained rows' updates stand at
+    ~26x their round-off estimate (past AUGMENTED_ROUND_OFF), a halved increment alike, and the run stops; the error
+    sent the user to more updates or a stiffer penalty, which did nothing or worse (hunt33_3). It says to lower the
+    penalty, and alpha 1e4 converges."""
+    from qsc_petsc.errors import ConvergenceError
+    base = ["contact.0.formulation=two_pass", "contact.0.enforcement=augmented_lagrangian"]
+    with pytest.raises(ConvergenceError, match=r"x their round-off .*: lower contact\[0\]\.penalty"):
+        run_scene(CONFIGS / "patch_test.toml", tmp_path / "stiff", base + ["contact.0.penalty=1e8"])
+    run, summary = run_scene(CONFIGS / "patch_test.toml", tmp_path / "soft", base + ["contact.0.penalty=1e4"])
+    run.destroy()
+    assert summary["status"] == "ok"
+
+
 @pytest.mark.parametrize("alpha", S.ALPHAS)
 def test_penalty_from_1_to_1e10(alpha):
     """For alpha 1e0 to 1e10 the matching patch test shall give sigma_zz = -p to 1e-8, the row penetration

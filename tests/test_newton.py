@@ -307,13 +307,13 @@ def test_a_try_reports_the_failure_of_its_last_solve():
              "ksp_reason": "CONVERGED_ITS", "active_rows": 10, "tied_in_tension": 0, "round_off_floor": 3e-2,
              "linear_short": False}
     later = dict(first, snes_iterations=5, damped_from=4, tied_rows=2, snes_reason="AUGMENTED_LAGRANGIAN_MAX_IT",
-                 multipliers_unsettled=("contact[1]", 1.6e-5, 1e-6), round_off_floor=None)
+                 multipliers_unsettled=("contact[1]", 1.6e-5, 1e-6, 1e-12), round_off_floor=None)
     _merge(first, later)
     assert first["round_off_floor"] is None      # the last solve's stop: no warning for an earlier solve's floor
     assert first["snes_iterations"] == 8 and first["ksp_iterations"] == 6 and first["jacobian_assemblies"] == 4
     assert (first["damped_from"], first["tied_rows"]) == (4, 2)
     assert first["snes_reason"] == "AUGMENTED_LAGRANGIAN_MAX_IT"
-    assert first["multipliers_unsettled"] == ("contact[1]", 1.6e-5, 1e-6)
+    assert first["multipliers_unsettled"] == ("contact[1]", 1.6e-5, 1e-6, 1e-12)
 
 
 @pytest.mark.parametrize("free, cap", [(2e6, 1), (None, None), (4e9, 3600)])

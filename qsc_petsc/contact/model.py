@@ -522,6 +522,14 @@ SLIP_GROWTH_FLOOR = 0.05
 # shallower than the pressed ones
 UNFORCED_WARNING = 1e-3
 UNFORCED_RATIO = 10.0
+# penalty rows (ContactModel.slip_warnings): pressed nodes deeper than DEEP_PENETRATION x h_eff are a penalty too soft
+# for the load (alpha 1 on the patch test at p = 0.5 E: 0.5 h_eff, no word; flat_punch at alpha 1: its force 11 %
+# low; hunt33_3), and penetrations p / eps_n (the slave's pressed nodes' mean pressure) below ROUND_OFF_PENETRATION x
+# eps |x| (x: the farthest node of the pair's surfaces) are round-off: alpha 1e10 at a strain of 1e-6 left 2.5e-14 m
+# (100 eps |x|), and the nodes read -2.5 to -6.2 times that (hunt33_3); a faceted sphere's nodes read 1000x their
+# p / eps_n off by its facets' sagitta, which no rule on their sign could tell from round-off
+DEEP_PENETRATION = 0.1
+ROUND_OFF_PENETRATION = 1e3
 
 
 class ContactModel:
@@ -543,6 +551,7 @@ class ContactModel:
         self.met = set()           # the pairs whose surfaces a search has found within reach (_check_found)
         self.apart = set()         # the pairs last said to have no rows (slip_warnings)
         self.unforced = {}         # per pair: the sides whose nodes its last report found sunk in with no force
+        self.pressed_depth = {}    # per pair: (deepest pressed node, slave's pressed mean, their p / eps_n, |x|) [m]
         # per pair (report): the load factor of the search that made its rows, whether the last search kept an
         # earlier search's, the last search's _gap_change, and the searches of the last increment
         self.searches = {f"contact[{pd['index']}]": {"load_factor": 0.0, "gap_change": None, "kept": False, "count": 0}
@@ -1099,6 +1108,15 @@ class ContactModel:
             ms = mean_pen["slave"][0] / max(mean_pen["slave"][1], 1e-300)
             mm = mean_pen["master"][0] / max(mean_pen["master"][1], 1e-300)
             entry["mean_penetration_slave"], entry["mean_penetration_master"] = ms, mm
+            # the pressed nodes' deepest penetration, and the slave's pressed nodes' mean penetration against
+            # their mean pressure's p / eps_n (slip_warnings)
+            pressed_area = max(mean_pen["slave"][3], 1e-300)
+            if "far" not in pd:
+                pd["far"] = self.comm.allreduce(float(np.abs(mesh.coords[np.concatenate([
+                    pd["slave"].nodes, pd["master"].nodes])]).max(initial=0.0)), op=MPI.MAX)
+            self.pressed_depth[pd["index"]] = (max(depth["slave", True], depth["master", True]),
+                                               mean_pen["slave"][2] / pressed_area,
+                                               mean_pen["slave"][4] / pressed_area / pd["eps_n"], pd["far"])
             entry["swap_indicator"] = _swap_indicator(mean_pen["slave"][2:], mean_pen["master"][2:], pd["eps_n"])
             entry["max_slip_step"] = step_slip
             entry["pressed_unfaced_nodes"] = pressed_unfaced
@@ -1261,6 +1279,26 @@ class ContactModel:
                     f"penetration over the faces beside it, open there, and through quasi_symmetric's nodal rows: "
                     f"{cure}. Or their rows were searched before they slid there: use more load steps or sliding = "
                     f"\"large\"")
+            deepest, mean, expected, far = self.pressed_depth.get(pd["index"], (0.0, 0.0, 0.0, 0.0))
+            if spec.enforcement == "penalty" and deepest > DEEP_PENETRATION * pd["h_eff"] and \
+                    (name, "deep") not in self.slip_warned:
+                self.slip_warned.add((name, "deep"))
+                lines.append(f"{name}: pressed nodes penetrate the other surface by up to {deepest:.3g} m = "
+                             f"{deepest / pd['h_eff']:.2g} h_eff: its penalty (alpha {spec.penalty:g}, eps_n "
+                             f"{pd['eps_n']:.3g} Pa/m) is soft for this load, and the bodies overlap that much: raise "
+                             f"{name}.penalty, or use enforcement = \"augmented_lagrangian\"")
+            precision = ROUND_OFF_PENETRATION * np.finfo(float).eps * far
+            # a pressure of a strain below 1e-10 (p / E = alpha p / (eps_n h_eff)) is itself round-off: rows that hold
+            # a loose stack with no load carry 1e-11 Pa
+            strain = expected * spec.penalty / pd["h_eff"]
+            if spec.enforcement == "penalty" and 0 < expected < precision and strain > 1e-10 and \
+                    (name, "round-off") not in self.slip_warned:
+                self.slip_warned.add((name, "round-off"))
+                lines.append(f"{name}: its pressure's penetration p / eps_n = {expected:.3g} m lies within "
+                             f"{ROUND_OFF_PENETRATION:g} x the coordinates' precision (eps |x| = "
+                             f"{precision / ROUND_OFF_PENETRATION:.3g} m; eps_n {pd['eps_n']:.3g} Pa/m): the reported "
+                             f"penetrations (contact_penetration, max/mean_penetration_*; the pressed slave nodes' mean "
+                             f"{mean:.3g} m) are round-off; a lower penalty reads them")
             slip = max(entry["max_slip_slave"], entry["max_slip_master"])
             if spec.sliding == "small" and slip > SLIP_WARNING * pd["h_eff"] and name not in self.slip_warned:
                 self.slip_warned.add(name)
