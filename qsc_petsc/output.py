@@ -7,6 +7,7 @@ one load step each, for meshio.read. Both are rewritten after every step: a run 
 later keeps what it had written.
 """
 
+import errno
 import json
 import os
 import textwrap
@@ -51,9 +52,14 @@ def clear_results(directory):
     stale += [p for p in directory.glob("*.tmp") if p.name[:-4] in dict(RESULTS)]
     if steps.is_dir():
         stale += list(steps.glob("step_*.xdmf")) + list(steps.glob("step_*.xdmf.tmp"))
+    stale = [path for path in stale if path.is_file()]
+    # all or nothing: a steps/ folder this process may not change lost the earlier run's other results first, and
+    # the run then stopped with no summary (hunt33_2)
     for path in stale:
-        if path.is_file():
-            path.unlink()
+        if not os.access(path.parent, os.W_OK | os.X_OK):
+            raise PermissionError(errno.EACCES, os.strerror(errno.EACCES), str(path))
+    for path in stale:
+        path.unlink()
 
 
 def write_on_root(comm, path, fn):

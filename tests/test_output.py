@@ -6,6 +6,7 @@ in-process. These tests start MPI jobs themselves and therefore run only in the 
 """
 
 import json
+from pathlib import Path
 
 import h5py
 import meshio
@@ -378,6 +379,22 @@ def test_a_run_clears_an_earlier_runs_results_from_its_folder(tmp_path):
     summary = json.loads((out / "summary.json").read_text())
     run.destroy()
     assert (summary["scene"], summary["status"], summary["steps"]) == ("patch_test", "running", [])
+
+
+def test_a_folder_it_cannot_clear_keeps_the_earlier_results(tmp_path, monkeypatch):
+    """An earlier run's steps/ this process may not change (another user's): the run stopped naming it (exit 2), but
+    had removed the earlier run's other results first (hunt33_2). Nothing goes unless everything can."""
+    from qsc_petsc import output
+    from qsc_petsc.errors import OutputError
+    out = tmp_path / "out"
+    run, _ = run_scene(CONFIGS / "patch_test.toml", out)
+    run.destroy()
+    before = sorted(p.relative_to(out).as_posix() for p in out.rglob("*") if p.is_file())
+    real = output.os.access
+    monkeypatch.setattr(output.os, "access", lambda path, mode: Path(path).name != "steps" and real(path, mode))
+    with pytest.raises(OutputError, match=r"cannot remove the earlier run's '.*step_0001.xdmf': Permission denied"):
+        run_scene(CONFIGS / "patch_test.toml", out)
+    assert sorted(p.relative_to(out).as_posix() for p in out.rglob("*") if p.is_file()) == before
 
 
 # ---------------------------------------------------------------- rank independence
