@@ -250,12 +250,12 @@ def read_mesh_file(path, scale=1.0):
     """
     import meshio  # only needed here
 
-    # meshio prints a failed reader's reason and then calls sys.exit: capture both
     gmsh = _gmsh_format(path)
     if gmsh is not None and gmsh[0].startswith("4") and gmsh[0] != "4.1":
         # meshio reads 4.1 and 2.2: 4.0 failed with "not enough values to unpack" (hunt33_1)
         raise MeshError(f"cannot read mesh file {path}: gmsh's format {gmsh[0]} is not read; save it as 4.1 or 2.2 "
                         f"(Mesh.MshFileVersion)")
+    # meshio prints a failed reader's reason and then calls sys.exit: capture both
     printed = io.StringIO()
     try:
         with redirect_stdout(printed), redirect_stderr(printed):

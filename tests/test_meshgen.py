@@ -196,7 +196,7 @@ def test_surface_facet_not_on_boundary(tmp_path):
     assert mesh.unusable["left"] == "1 of 9 of its facets are not boundary faces of the tetra cells"
 
 
-def _gmsh_box(path, version, groups, save_all=False):
+def _gmsh_box(path, version, groups, save_all=False, binary=False):
     """A gmsh box [0, 1] x [0, 1] x [0, 0.5] of tets written as msh `version`; groups: (name or None, tag, sides)
     physical groups of faces. Returns the number of faces on each side."""
     gmsh = pytest.importorskip("gmsh")
@@ -216,6 +216,7 @@ def _gmsh_box(path, version, groups, save_all=False):
         gmsh.option.setNumber("Mesh.MeshSizeMax", 0.25)
         gmsh.option.setNumber("Mesh.MshFileVersion", version)
         gmsh.option.setNumber("Mesh.SaveAll", int(save_all))
+        gmsh.option.setNumber("Mesh.Binary", int(binary))
         gmsh.model.mesh.generate(3)
         faces = {k: len(gmsh.model.mesh.getElements(2, t)[1][0]) for k, t in side.items()}
         gmsh.write(str(path))
@@ -224,13 +225,13 @@ def _gmsh_box(path, version, groups, save_all=False):
     return faces
 
 
-@pytest.mark.parametrize("version", [2.2, 4.1])
-def test_gmsh_groups_that_share_faces(tmp_path, version):
+@pytest.mark.parametrize("version, binary", [(2.2, False), (4.1, False), (4.1, True)])
+def test_gmsh_groups_that_share_faces(tmp_path, version, binary):
     """A face in two physical groups belongs to both. meshio keeps a msh 4.1 entity's first group alone: an
     unnamed group lost the top it shared with a named one, and a pressure on it never applied (exit 0; hunt33_1)."""
     path = tmp_path / "box.msh"
     faces = _gmsh_box(path, version, [("top", 1, ["zmax"]), (None, 20, ["zmax", "xmax"]),
-                                      ("skin", 2, ["xmin", "zmin", "zmax"])])
+                                      ("skin", 2, ["xmin", "zmin", "zmax"])], binary=binary)
     mesh = read_mesh_file(path)
     counts = {name: len(rows) for name, rows in mesh.surfaces.items()}
     assert counts["top"] == faces["zmax"]
