@@ -226,11 +226,35 @@ def stiffness(cell_type, xe, lmbda, mu, share_translates=True, ids=None, kappa=N
     return K
 
 
-def strain_energy(cell_type, xe, ue, lmbda, mu):
-    """Strain energy 1/2 int eps : D eps dV (m,) of displacements ue (m, 3n), integrated with the stiffness rule."""
+def mean_dilatation(cell_type, xe, ue):
+    """Each cell's mean dilatation (m,): the integral of div u over the cell over its volume, for displacements ue
+    (m, 3n) (the volumetric strain a mean-dilatation cell takes everywhere: _stiffness_into's kappa)."""
+    xe = np.asarray(xe, float)
+    xi, w = QUADRATURE[cell_type]
+    Gw, detJ = _gradients(cell_type, xe, xi, weights=w)
+    b, volume = _mean_divergence(Gw.reshape(len(xe), len(xi), -1), detJ, w)
+    return np.einsum("ck,ck->c", b, np.asarray(ue, float)) / volume
+
+
+def with_mean_dilatation(eps, theta):
+    """Voigt strains (n, 6) whose volumetric part is theta (n,) in place of their own trace: B-bar's strain."""
+    out = np.array(eps, dtype=float)
+    out[:, :3] += ((theta - out[:, :3].sum(axis=1)) / 3.0)[:, None]
+    return out
+
+
+def strain_energy(cell_type, xe, ue, lmbda, mu, kappa=None):
+    """Strain energy 1/2 int eps : D eps dV (m,) of displacements ue (m, 3n), integrated with the stiffness rule;
+    a cell with kappa > 0 (stiffness) takes its volumetric strain from its mean dilatation, as its stiffness does."""
     xi, w = QUADRATURE[cell_type]
     B, detJ = strain_displacement(cell_type, xe, xi)
     eps = B @ np.asarray(ue, float)[:, None, :, None]              # (m, nq, 6, 1)
+    if kappa is not None and np.any(np.asarray(kappa) > 0):
+        mean = np.broadcast_to(np.asarray(kappa, float), (len(eps),)) > 0
+        theta = mean_dilatation(cell_type, np.asarray(xe, float)[mean], np.asarray(ue, float)[mean])
+        nq = eps.shape[1]
+        eps[mean] = with_mean_dilatation(eps[mean][..., 0].reshape(-1, 6), np.repeat(theta, nq)).reshape(
+            -1, nq, 6, 1)
     D = elasticity_matrix(lmbda, mu)
     D = D[:, None] if D.ndim == 3 else D
     sigma = D @ eps
@@ -255,17 +279,13 @@ def cell_stress(cell_type, xe, ue, lmbda, mu, chunk=16384, kappa=None):
         eps = H.reshape(len(H), 9) @ _VOIGT_OF_GRADIENT                           # Voigt strain, as B u gives it
         out[c] = (elasticity_matrix(lmbda[c], mu[c]) @ eps[..., None])[..., 0]
     if kappa is not None:
-        mean = np.flatnonzero(np.broadcast_to(np.asarray(kappa, float), (m,)) > 0)
         kappa = np.broadcast_to(np.asarray(kappa, float), (m,))
-        xi, w = QUADRATURE[cell_type]
+        mean = np.flatnonzero(kappa > 0)
         for s in range(0, len(mean), chunk):
             c = mean[s:s + chunk]
-            Gw, detJ = _gradients(cell_type, xe[c], xi, weights=w)
-            b, volume = _mean_divergence(Gw.reshape(len(c), len(xi), 3 * n), detJ, w)
-            theta = np.einsum("ck,ck->c", b, ue[c]) / volume
             G, _ = _gradients(cell_type, xe[c], np.atleast_2d(fem.CENTROID[cell_type]))
             div = np.einsum("cak,cak->c", G[:, 0], ue[c].reshape(-1, n, 3))
-            out[c, :3] += (kappa[c] * (theta - div))[:, None]
+            out[c, :3] += (kappa[c] * (mean_dilatation(cell_type, xe[c], ue[c]) - div))[:, None]
     return out
 
 

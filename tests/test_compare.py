@@ -214,3 +214,42 @@ def test_a_pair_with_slave_and_master_swapped_compares_the_same_force():
     assert same["contact[0]"]["force"] == pytest.approx(1e-3)
     other = compare.contact_errors(step("contact[0] a.s / b.s", 1.0), step("contact[0] c.s / d.s", -1.0))
     assert other["contact[0]"]["force"] == pytest.approx(2.0)      # another pair: no swap to undo
+
+
+def test_mean_dilatation_runs_compare_in_their_own_energy(tmp_path):
+    """A mean-dilatation body's energy takes each cell's mean dilatation as its volumetric strain, as its stiffness
+    does: compare weighted the pointwise one by a nearly incompressible body's bulk modulus, and read a run 0.06 %
+    off as 78 % off in energy, its strain energy 16x the run's (hunt33_4). A block clamped at its base under an
+    uneven pressure, nu 0.4999: the energy error shrinks with h, and the strain energy is 1/2 u^T K u."""
+    scene = tmp_path / "block.toml"
+    scene.write_text('''name = "block"
+[[bodies]]
+name = "block"
+mesh = { type = "box", origin = [0.0, 0.0, 0.0], size = [1.0, 1.0, 1.0], cells = [2, 2, 2] }
+material = { youngs_modulus = 1000.0, poissons_ratio = 0.4999, volumetric = "mean_dilatation" }
+[[boundary]]
+surface = "block.zmin"
+type = "displacement"
+ux = 0.0
+uy = 0.0
+uz = 0.0
+[[boundary]]
+surface = "block.zmax"
+type = "pressure"
+value = "1 + x"
+[petsc]
+ksp_type = "preonly"
+pc_type = "lu"
+''')
+    for n in (2, 4, 8):
+        run_scene(scene, tmp_path / str(n), [f"bodies.0.mesh.cells=[{n},{n},{n}]"])[0].destroy()
+    coarse, fine = (compare.errors(tmp_path / str(n), tmp_path / "8") for n in (2, 4))
+    assert coarse["energy"] < 0.5 and fine["energy"] < 0.7 * coarse["energy"]
+    assert fine["displacement_l2"] < 0.5 * coarse["displacement_l2"]
+    result = compare.load_result(tmp_path / "2")
+    from qsc_petsc import elasticity
+    lm, mu = result.lame()
+    xe = result.points[result.cells]
+    ue = result.point_data["displacement"][result.cells].reshape(len(xe), -1)
+    K = elasticity.stiffness("hex", xe, lm, mu, kappa=lm + 2 * mu / 3)
+    assert compare.strain_energy(result) == pytest.approx(0.5 * np.einsum("ma,mab,mb->", ue, K, ue), rel=1e-10)
