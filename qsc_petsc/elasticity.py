@@ -114,11 +114,27 @@ def _gradients(cell_type, xe, xi, ids=None, weights=None):
 
 
 def check_cells(cell_type, coords, cells, ids, batch=20000):
-    """Raise DegenerateCell for the first of cells (m, n) over coords whose det J is not positive beyond
-    round-off at a quadrature point: the assembly's test (_gradients), without the stiffness (`qsc check`)."""
+    """Raise DegenerateCell for the first of cells (m, n) over coords whose det J is not above MIN_RELATIVE_DET of
+    its Jacobian's longest column cubed at a quadrature point: the assembly's test (_gradients), without the
+    gradients (0.33 s for 328k hexes on one core, 1.9 s through _gradients)."""
     xi = QUADRATURE[cell_type][0]
+    _, dN = fem.SHAPE[cell_type](xi)
+    nq, n = len(dN), dN.shape[1]
+    D = dN.transpose(1, 2, 0).reshape(n, 3 * nq)
     for a in range(0, len(cells), batch):
-        _gradients(cell_type, coords[cells[a:a + batch]], xi, ids[a:a + batch])
+        xe = coords[cells[a:a + batch]]
+        m = len(xe)
+        J = (xe.transpose(2, 0, 1).reshape(3 * m, n) @ D).reshape(3, m, 3, nq)      # J[i, cell, k, q] = dx_i/dxi_k
+        det = (J[0, :, 0] * (J[1, :, 1] * J[2, :, 2] - J[1, :, 2] * J[2, :, 1])
+               - J[0, :, 1] * (J[1, :, 0] * J[2, :, 2] - J[1, :, 2] * J[2, :, 0])
+               + J[0, :, 2] * (J[1, :, 0] * J[2, :, 1] - J[1, :, 1] * J[2, :, 0]))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            relative = det / ((J ** 2).sum(axis=0).max(axis=1)) ** 1.5
+        bad = np.flatnonzero((~(relative > MIN_RELATIVE_DET)).any(axis=1))
+        if len(bad):
+            c = bad[0]
+            raise DegenerateCell(cell_type, int(ids[a + c]), f"det J = {det[c].min():.3g} at a quadrature point, "
+                                 f"{relative[c].min():.3g} relative to the cell's size (not above {MIN_RELATIVE_DET:g})")
 
 
 def strain_displacement(cell_type, xe, xi):

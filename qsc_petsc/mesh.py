@@ -166,6 +166,36 @@ def on_root(comm, fn):
     return result
 
 
+# a generated box's cells are translates of one cell, exact but for their coordinates' round-off, eps |x|: they are
+# checked (check_cells) only beyond this many cell sizes from the origin (eps |x| 2e-12 of a cell there, against the
+# element test's 1e-10 of its volume)
+BOX_EXACT_REACH = 1e4
+
+
+def check_cells(mesh, scene):
+    """A MeshError on every rank naming the first inverted or degenerate cell of any rank (the assembly's test,
+    elasticity.check_cells), before anything uses the cells: `qsc check` called a flat tet valid (hunt33_1), and a
+    run with contact met cells degenerate by their coordinates' round-off (1 m boxes 1e16 m out) in its search
+    first, a ZeroDivisionError and exit 1 (hunt33_5). A generated box's cells are checked only far from the origin
+    (BOX_EXACT_REACH). Collective."""
+    from . import elasticity
+    check = np.ones(len(mesh.cells), dtype=bool)
+    for b, body in enumerate(scene.bodies):
+        spec = body.mesh
+        if spec.type == "box":
+            mine = mesh.cell_body == b
+            cell = float(np.min(np.asarray(spec.size, float) / np.asarray(spec.cells, float)))
+            far = float(np.abs(mesh.coords[mesh.cells[mine]]).max(initial=0.0))
+            check[mine] = far > BOX_EXACT_REACH * cell
+
+    def sound():
+        try:
+            elasticity.check_cells(mesh.cell_type, mesh.coords, mesh.cells[check], mesh.cell_orig[check])
+        except elasticity.DegenerateCell as exc:
+            raise MeshError(f"{mesh.describe_cell(exc.cell)} is inverted or degenerate: {exc.detail}") from None
+    on_all(mesh.comm, sound)
+
+
 def on_all(comm, fn):
     """Run fn on every rank; if any rank raises a QscError, every rank raises the first one (by rank)."""
     result, error = None, None

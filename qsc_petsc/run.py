@@ -14,7 +14,7 @@ from petsc4py import PETSc
 
 from . import __version__, assembly, elasticity, lattice, options, preconditioner
 from .errors import OutputError, QscError, SceneError
-from .mesh import distribute_mesh, on_root
+from .mesh import check_cells, distribute_mesh, on_root
 from .output import ResultWriter, check_output_folder, clear_results, write_json, write_on_root
 from .restraint import Restraint, describe
 from .scene import PETSC_DEFAULTS
@@ -166,6 +166,7 @@ class Run:
         options.check_options()
         with self.phases("mesh"):
             self.mesh = distribute_mesh(scene, comm)
+            check_cells(self.mesh, scene)
         mesh = self.mesh
         for line in assembly.locking_warnings(scene, mesh.cell_type):
             self.log(f"warning: {line}")
@@ -177,6 +178,8 @@ class Run:
                 self.log(f"warning: {line}")
             # the first increment's search comes first: K's pattern holds its contact stencil (set_terms)
             extra, stencil_digests = self.contact.prepare(1.0 / scene.load.steps)
+            for line in self.contact.die_away_warnings():        # from the first search's reach
+                self.log(f"warning: {line}")
         with self.phases("assembly"):
             self.lmbda, self.mu = assembly.cell_materials(mesh, scene)
             self.kappa = assembly.cell_mean_bulk(mesh, scene)

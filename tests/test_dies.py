@@ -4,7 +4,7 @@ as one, and the pressure field where a die and a pair press one surface (a helpe
 import meshio
 import numpy as np
 import pytest
-from conftest import run_scene, write_gmsh
+from conftest import CONFIGS, run_scene, write_gmsh
 from mpi4py import MPI
 
 from qsc_petsc import fem, solver
@@ -471,6 +471,23 @@ def test_a_die_turned_away_from_its_surface_says_so(tmp_path):
     with pytest.raises(ConvergenceError, match=r"die\[1\] \(top\): 25 node\(s\) within the die's reach, of faces "
                                                r"turned away from it, went through it: a die holds only"):
         run_scene(path, tmp_path / "out", ["solver.max_cutbacks=1"])
+
+
+def test_a_body_a_turned_die_leaves_free_names_the_die(tmp_path):
+    """configs/two_cubes_dies.toml with its top die's normal the wrong way round: `qsc check` and the run stopped on
+    "free rigid-body motion of upper ...: add a boundary condition", the die's warning never said (hunt33_5).
+    check's error now names the die and its normal; the run says the warning before it stops. A body held
+    otherwise: the run says it too, where it said nothing and its die's force was 0."""
+    flip = ["die.1.normal=[0,0,1]"]
+    scene = load_scene(CONFIGS / "two_cubes_dies.toml", flip)
+    with pytest.raises(SceneError, match=r"free rigid-body motion of upper .*; and die\[1\] top: 100 node\(s\) .* "
+                                         r"check the sign of its normal"):
+        from qsc_petsc.check import check
+        check(scene, MPI.COMM_WORLD)
+    lines = []
+    with pytest.raises(SceneError, match="free rigid-body motion of upper"):
+        run_scene(CONFIGS / "two_cubes_dies.toml", tmp_path / "run", flip, log=lines.append)
+    assert any(line.startswith("warning: die[1] top: 100 node(s)") for line in lines), lines
 
 
 def test_a_die_that_fights_a_boundary_is_said(tmp_path):

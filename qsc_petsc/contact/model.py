@@ -621,6 +621,24 @@ class ContactModel:
                                  f"grows with its penalty")
         return lines
 
+    def die_away_warnings(self):
+        """Lines naming the dies with nodes of their surfaces on or past their plane, at u = 0, whose faces turn away
+        from them and which no row holds: the die would go through them (a normal the wrong way round, or a die on
+        an edge of a surface that does not face it; hunt31_2). `qsc check` and a run's start say them (the run
+        said nothing, its die's force 0; hunt33_5). Collective."""
+        lines = []
+        X = self.mesh.coords
+        for dd in self.dies:
+            depth = _die_depth(dd, X, 0.0 * X, 0.0)
+            n = np.asarray(dd["spec"].normal, dtype=float)
+            turned = facing_pairs(nodal_normals(self.mesh, dd["surface"], X, by="angle"), n)   # as _die_rows
+            on = _on_die(dd, depth, self.scene.solver.active_set_tolerance)
+            away = self.comm.allreduce(int((~turned & on & self.mesh.owned[dd["nodes"]]).sum()), op=MPI.SUM)
+            if away:
+                lines.append(f"die[{dd['index']}] {dd['spec'].name}: {away} node(s) of its surfaces lie on or past its "
+                             f"plane with faces turned away from it, and no row: {DIE_AWAY}")
+        return lines
+
     def precision_warnings(self):
         """A line (in a list; none if all is well) naming the pairs and dies whose element size is within
         1 / COORDINATE_PRECISION of their coordinates' precision, eps |x| (x: the farthest node of the pair's
@@ -1457,8 +1475,16 @@ def contact_plan(mesh, scene, held=None, fixed=None):
     template = mesh.dof_vector()
     model = ContactModel(mesh, scene, template)
     terms = model.terms(template, 1.0 / scene.load.steps)
+    away = model.die_away_warnings()
     if held is not None:
-        held(terms)
+        try:
+            held(terms)
+        except SceneError as exc:
+            # a body a die was to hold, free because the die's normal is the wrong way round: the message sent the
+            # user to the boundaries (hunt33_5)
+            if not away:
+                raise
+            raise SceneError(f"{exc}; and {'; '.join(away)}") from None
     lines = []
     for pd, term in zip(model.pairs, terms):
         spec = pd["spec"]
@@ -1477,14 +1503,7 @@ def contact_plan(mesh, scene, held=None, fixed=None):
         rows = mesh.comm.allreduce(len(term.rows), op=MPI.SUM)
         lines.append(f"die[{dd['index']}] {spec.name}: rigid plane, {spec.condition}, on {', '.join(spec.surfaces)}; "
                      f"eps_n {dd['eps_n']:.4g} Pa/m; {rows} candidate rows at the first search")
-        # nodes on or past the plane that no row holds: the die would go through them (a normal the wrong way
-        # round, or the die on an edge of a surface that does not face it; hunt31_2)
-        on = _on_die(dd, _die_depth(dd, mesh.coords, 0.0 * mesh.coords, 0.0), scene.solver.active_set_tolerance)
-        away = mesh.comm.allreduce(int((dd["away"] & on & mesh.owned[dd["nodes"]]).sum()), op=MPI.SUM)
-        if away:
-            lines.append(f"warning: die[{dd['index']}] {spec.name}: {away} node(s) of its surfaces lie on or past its "
-                         f"plane with faces turned away from it, and no row: {DIE_AWAY}")
-    lines += [f"warning: {line}" for line in model.precision_warnings()]
+    lines += [f"warning: {line}" for line in away + model.precision_warnings()]
     if fixed is not None:
         lines += [f"warning: {line}" for line in model.hold_warnings(*fixed)]
     model.destroy()
