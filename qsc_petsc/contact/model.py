@@ -1042,9 +1042,29 @@ class ContactModel:
             raise SceneError(f"contact[{pd['index']}]: no node of {spec.slave!r} or {spec.master!r} is within the "
                              f"search distance ({pd['radius']:.3g} m = search_distance x element size) of the "
                              f"other surface and turned towards it (outward normals within 70 degrees of facing "
-                             f"each other); increase contact[{pd['index']}].search_distance or check the geometry "
-                             f"and the surfaces' faces")
+                             f"each other){self._apart(pd)}; increase contact[{pd['index']}].search_distance or "
+                             f"check the geometry and the surfaces' faces")
         return found
+
+    def _apart(self, pd):
+        """For _check_found's error: how far the slave surface's centre lies from the master's along the master's
+        mean outward normal, saying when that is an overlap (the bodies pushed into each other beyond the reach
+        read only "not within the search distance"; hunt33_3 F7). Collective."""
+        def centre_and_normal(S):
+            a = S.area[:, None]
+            sums = self.comm.allreduce(np.concatenate([(a * self.mesh.coords[S.nodes]).sum(axis=0),
+                                                       (a * S.normal).sum(axis=0), [S.area.sum()]]), op=MPI.SUM)
+            return sums[:3] / max(sums[6], 1e-300), sums[3:6]
+        slave, _ = centre_and_normal(pd["slave"])
+        master, normal = centre_and_normal(pd["master"])
+        size = np.linalg.norm(normal)
+        if size < 0.5 * pd["master"].total_area:      # a curved or closed master has no direction to measure along
+            return ""
+        d = float((slave - master) @ normal / size)
+        if d < -pd["radius"]:
+            return (f"; the slave surface's centre lies {-d:.3g} m behind the master surface along its mean outward "
+                    f"normal: the bodies overlap by more than the search distance")
+        return f"; the slave surface's centre lies {d:.3g} m from the master surface along its mean outward normal"
 
     def add_forces(self, u, r):
         """r += sum of G^T m over all terms at u (for reactions)."""

@@ -590,13 +590,16 @@ def test_bad_contact_input(comm, mpi_tmp, change, message):
 
 
 def test_surfaces_beyond_search_distance(comm, mpi_tmp):
-    """Surfaces farther apart than the search distance are an error naming the pair; the failed set-up
-    takes its scene's PETSc options back out (the next run in the process must not inherit them)."""
+    """Surfaces farther apart than the search distance are an error naming the pair, and how far apart they are
+    (bodies pushed into each other beyond the reach read the same line; hunt33_3 F7); the failed set-up takes its
+    scene's PETSc options back out (the next run in the process must not inherit them)."""
     from petsc4py import PETSc
     before = PETSc.Options().getAll()
-    with pytest.raises(SceneError, match=r"contact\[0\]: no node"):
+    with pytest.raises(SceneError, match=r"contact\[0\]: no node.*centre lies 0.4 m from the master surface"):
         run_scene(CONFIGS / "patch_test.toml", mpi_tmp, ["bodies.1.mesh.origin=[0,0,0.9]"], comm)
     assert "qsc_pc_type" not in set(PETSc.Options().getAll()) - set(before)
+    with pytest.raises(SceneError, match=r"centre lies 0.2 m behind the master surface .*: the bodies overlap"):
+        run_scene(CONFIGS / "patch_test.toml", mpi_tmp, ["bodies.1.mesh.origin=[0,0,0.3]"], comm)
 
 
 def test_augmented_lagrangian_removes_the_penalty_error(comm, mpi_tmp):
