@@ -277,9 +277,10 @@ def strain_energy(cell_type, xe, ue, lmbda, mu, kappa=None):
     return 0.5 * np.einsum("mqi,mqi,mq,q->m", eps[..., 0], sigma[..., 0], detJ, w)
 
 
-def cell_stress(cell_type, xe, ue, lmbda, mu, chunk=16384, kappa=None):
+def cell_stress(cell_type, xe, ue, lmbda, mu, chunk=16384, kappa=None, rotation=None):
     """Cauchy stress (m, 6), Voigt order, at each cell's reference centroid; kappa (stiffness): a cell with kappa > 0
-    takes its mean dilatation's pressure (kappa times the cell's mean div u in place of div u there).
+    takes its mean dilatation's pressure (kappa times the cell's mean div u in place of div u there); rotation: None,
+    or an array (m,) that takes each cell's largest infinitesimal rotation there (the skew part of grad u), rad.
 
     Computed from the displacement gradient H = G^T u_e (G the shape-function gradients there) and the Voigt
     table, not from the strain-displacement matrix B (6 x 3n per cell): 100k distorted hexes, both chunked,
@@ -294,6 +295,8 @@ def cell_stress(cell_type, xe, ue, lmbda, mu, chunk=16384, kappa=None):
         H = np.matmul(G[:, 0].transpose(0, 2, 1), ue[c].reshape(-1, n, 3))      # H_kj = d u_j / d x_k
         eps = H.reshape(len(H), 9) @ _VOIGT_OF_GRADIENT                           # Voigt strain, as B u gives it
         out[c] = (elasticity_matrix(lmbda[c], mu[c]) @ eps[..., None])[..., 0]
+        if rotation is not None:
+            rotation[c] = 0.5 * np.abs(H - H.transpose(0, 2, 1)).reshape(len(H), 9).max(axis=1)
     if kappa is not None:
         kappa = np.broadcast_to(np.asarray(kappa, float), (m,))
         mean = np.flatnonzero(kappa > 0)
