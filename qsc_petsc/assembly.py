@@ -66,12 +66,12 @@ def locking_warnings(scene, cell_type):
         nu = body.material.poissons_ratio
         if nu < LOCKING_NU or body.material.volumetric == "mean_dilatation":
             continue
-        cure = ('set bodies[{i}].material.volumetric = "mean_dilatation" (B-bar)' if cell_type == "hex" else
+        cure = (f'set bodies[{i}].material.volumetric = "mean_dilatation" (B-bar)' if cell_type == "hex" else
                 "linear tetrahedra have no cure here: mesh the body with hexahedra and mean_dilatation")
         lines.append(f"bodies[{i}] ({body.name}): Poisson's ratio {nu:g} with fully integrated "
                      f"{'hexahedra' if cell_type == 'hex' else 'linear tetrahedra'}, which lock in volume: "
                      f"the body answers too stiff wherever its strain is not uniform (a punch's force 1.3x at nu "
-                     f"0.49, 2.6x at 0.499 on hexes); " + cure.format(i=i))
+                     f"0.49, 2.6x at 0.499 on hexes); {cure}")
     return lines
 
 
@@ -81,11 +81,8 @@ def cell_mean_bulk(mesh, scene):
     does (every kernel then integrates fully, as before)."""
     if all(b.material.volumetric == "full" for b in scene.bodies):
         return None
-    bulk = np.zeros(len(scene.bodies))
-    for i, b in enumerate(scene.bodies):
-        if b.material.volumetric == "mean_dilatation":
-            lmbda, mu = elasticity.lame(b.material.youngs_modulus, b.material.poissons_ratio)
-            bulk[i] = lmbda + 2.0 * mu / 3.0
+    bulk = np.array([elasticity.mean_dilatation_bulk(b.material.youngs_modulus, b.material.poissons_ratio,
+                                                     b.material.volumetric) for b in scene.bodies])
     return bulk[mesh.cell_body]
 
 

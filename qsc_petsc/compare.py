@@ -87,11 +87,10 @@ class Result:
     def mean_bulk(self):
         """Per cell, the bulk modulus its body takes with the cell's mean dilatation (material.volumetric =
         "mean_dilatation"), else 0; None when no body does (assembly.cell_mean_bulk's)."""
-        mean = np.array([b["material"].get("volumetric", "full") == "mean_dilatation" for b in self.scene["bodies"]])
-        if not mean.any():
-            return None
-        lm, mu = self.lame()
-        return np.where(mean[self.cell_body], lm + 2.0 * mu / 3.0, 0.0)
+        bulk = np.array([elasticity.mean_dilatation_bulk(m["youngs_modulus"], m.get("poissons_ratio", 0.3),
+                                                         m.get("volumetric", "full"))
+                         for m in (b["material"] for b in self.scene["bodies"])])
+        return bulk[self.cell_body] if bulk.any() else None
 
     def mean_dilatations(self):
         """Each cell's mean dilatation (elasticity.mean_dilatation), computed once."""

@@ -62,6 +62,15 @@ def lame(youngs_modulus, poissons_ratio):
     return E * nu / ((1.0 + nu) * (1.0 - 2.0 * nu)), E / (2.0 * (1.0 + nu))
 
 
+def mean_dilatation_bulk(youngs_modulus, poissons_ratio, volumetric):
+    """The bulk modulus lmbda + 2 mu / 3 [Pa] a material takes with each cell's mean dilatation (its volumetric =
+    "mean_dilatation": B-bar), else 0 (integrated fully)."""
+    if volumetric != "mean_dilatation":
+        return 0.0
+    lmbda, mu = lame(youngs_modulus, poissons_ratio)
+    return float(lmbda + 2.0 * mu / 3.0)
+
+
 def elasticity_matrix(lmbda, mu):
     """Isotropic elasticity matrix D (..., 6, 6) in Voigt order, for scalar or (m,) Lame parameters."""
     lmbda, mu = np.asarray(lmbda, float)[..., None, None], np.asarray(mu, float)[..., None, None]
@@ -78,6 +87,30 @@ class DegenerateCell(MeshError):
         self.cell, self.detail = cell, detail
 
 
+def _jacobians(xe, dN):
+    """The Jacobians of cells xe (m, n, 3) at the points of shape-function derivatives dN (nq, n, 3), in one GEMM,
+    as 3x3 components of (m, nq) arrays (so that cofactors are plain vector arithmetic): J[i, k] = d x_i / d xi_k."""
+    m, n = xe.shape[:2]
+    nq = len(dN)
+    J = xe.transpose(2, 0, 1).reshape(3 * m, n) @ dN.transpose(1, 2, 0).reshape(n, 3 * nq)
+    return J.reshape(3, m, 3, nq).transpose(0, 2, 1, 3)
+
+
+def _refuse_degenerate(cell_type, J, detJ, ids=None):
+    """Raise DegenerateCell for the first cell whose det J (m, nq) is not above MIN_RELATIVE_DET of the cube of its
+    Jacobian's (J: _jacobians) longest column at a point (1 for a cube, 0 flat, < 0 inverted: a flat cell's det J is
+    round-off of either sign, so det J <= 0 alone lets some through), naming it ids[row] (default: row)."""
+    longest = np.maximum.reduce([J[0, k] ** 2 + J[1, k] ** 2 + J[2, k] ** 2 for k in range(3)])
+    with np.errstate(divide="ignore", invalid="ignore"):        # a cell collapsed to a point: NaN, caught below
+        relative = detJ / longest ** 1.5
+    bad = np.flatnonzero((~(relative > MIN_RELATIVE_DET)).any(axis=1))
+    if len(bad):
+        c = bad[0]
+        raise DegenerateCell(cell_type, int(c if ids is None else ids[c]),
+                             f"det J = {detJ[c].min():.3g} at a quadrature point, {relative[c].min():.3g} relative "
+                             f"to the cell's size (not above {MIN_RELATIVE_DET:g})")
+
+
 def _gradients(cell_type, xe, xi, ids=None, weights=None):
     """Physical shape-function gradients G (m, nq, n, 3) and det J (m, nq) at reference points xi (nq, 3).
 
@@ -88,24 +121,11 @@ def _gradients(cell_type, xe, xi, ids=None, weights=None):
     _, dN = fem.SHAPE[cell_type](xi)                               # (nq, n, 3) d N_a / d xi_k
     m, n = xe.shape[:2]
     nq = len(dN)
-    # One GEMM for all Jacobians, kept as 3x3 components of (m, nq) arrays so that the
-    # cofactors below are plain vector arithmetic: J[i][k] = d x_i / d xi_k.
-    J = xe.transpose(2, 0, 1).reshape(3 * m, n) @ dN.transpose(1, 2, 0).reshape(n, 3 * nq)
-    J = J.reshape(3, m, 3, nq).transpose(0, 2, 1, 3)
+    J = _jacobians(xe, dN)
     cof = [[J[(i + 1) % 3, (k + 1) % 3] * J[(i + 2) % 3, (k + 2) % 3]
             - J[(i + 1) % 3, (k + 2) % 3] * J[(i + 2) % 3, (k + 1) % 3] for k in range(3)] for i in range(3)]
     detJ = J[0, 0] * cof[0][0] + J[0, 1] * cof[0][1] + J[0, 2] * cof[0][2]
-    # det J over the cube of the Jacobian's longest column (1 for a cube, 0 flat, < 0 inverted): a flat cell's det J
-    # is round-off of either sign, so det J <= 0 alone lets some through
-    longest = np.maximum.reduce([J[0, k] ** 2 + J[1, k] ** 2 + J[2, k] ** 2 for k in range(3)])
-    with np.errstate(divide="ignore", invalid="ignore"):        # a cell collapsed to a point: NaN, caught below
-        relative = detJ / longest ** 1.5
-    bad = np.flatnonzero((~(relative > MIN_RELATIVE_DET)).any(axis=1))
-    if len(bad):
-        c = bad[0]
-        raise DegenerateCell(cell_type, int(c if ids is None else ids[c]),
-                             f"det J = {detJ[c].min():.3g} at a quadrature point, {relative[c].min():.3g} relative "
-                             f"to the cell's size (not above {MIN_RELATIVE_DET:g})")
+    _refuse_degenerate(cell_type, J, detJ, ids)
     scale = 1.0 / detJ if weights is None else np.sqrt(weights / detJ)
     # G_ai = dN_ak (J^-1)_ki with J^-1 = cof^T / det J: one (n, 3) x (3, 3m) GEMM per quadrature point
     Jinv = (np.array(cof) * scale).transpose(3, 1, 2, 0).reshape(nq, 3, 3 * m)   # [q, k, (m, i)]
@@ -117,24 +137,12 @@ def check_cells(cell_type, coords, cells, ids, batch=20000):
     """Raise DegenerateCell for the first of cells (m, n) over coords whose det J is not above MIN_RELATIVE_DET of
     its Jacobian's longest column cubed at a quadrature point: the assembly's test (_gradients), without the
     gradients (0.33 s for 328k hexes on one core, 1.9 s through _gradients)."""
-    xi = QUADRATURE[cell_type][0]
-    _, dN = fem.SHAPE[cell_type](xi)
-    nq, n = len(dN), dN.shape[1]
-    D = dN.transpose(1, 2, 0).reshape(n, 3 * nq)
+    _, dN = fem.SHAPE[cell_type](QUADRATURE[cell_type][0])
     for a in range(0, len(cells), batch):
-        xe = coords[cells[a:a + batch]]
-        m = len(xe)
-        J = (xe.transpose(2, 0, 1).reshape(3 * m, n) @ D).reshape(3, m, 3, nq)      # J[i, cell, k, q] = dx_i/dxi_k
-        det = (J[0, :, 0] * (J[1, :, 1] * J[2, :, 2] - J[1, :, 2] * J[2, :, 1])
-               - J[0, :, 1] * (J[1, :, 0] * J[2, :, 2] - J[1, :, 2] * J[2, :, 0])
-               + J[0, :, 2] * (J[1, :, 0] * J[2, :, 1] - J[1, :, 1] * J[2, :, 0]))
-        with np.errstate(divide="ignore", invalid="ignore"):
-            relative = det / ((J ** 2).sum(axis=0).max(axis=1)) ** 1.5
-        bad = np.flatnonzero((~(relative > MIN_RELATIVE_DET)).any(axis=1))
-        if len(bad):
-            c = bad[0]
-            raise DegenerateCell(cell_type, int(ids[a + c]), f"det J = {det[c].min():.3g} at a quadrature point, "
-                                 f"{relative[c].min():.3g} relative to the cell's size (not above {MIN_RELATIVE_DET:g})")
+        J = _jacobians(coords[cells[a:a + batch]], dN)
+        det = (J[0, 0] * (J[1, 1] * J[2, 2] - J[1, 2] * J[2, 1]) - J[0, 1] * (J[1, 0] * J[2, 2] - J[1, 2] * J[2, 0])
+               + J[0, 2] * (J[1, 0] * J[2, 1] - J[1, 1] * J[2, 0]))
+        _refuse_degenerate(cell_type, J, det, ids[a:a + batch])
 
 
 def strain_displacement(cell_type, xe, xi):
@@ -267,7 +275,8 @@ def strain_energy(cell_type, xe, ue, lmbda, mu, kappa=None):
     eps = B @ np.asarray(ue, float)[:, None, :, None]              # (m, nq, 6, 1)
     if kappa is not None and np.any(np.asarray(kappa) > 0):
         mean = np.broadcast_to(np.asarray(kappa, float), (len(eps),)) > 0
-        theta = mean_dilatation(cell_type, np.asarray(xe, float)[mean], np.asarray(ue, float)[mean])
+        # the mean dilatation from the same points' strains: the integral of div u over the volume
+        theta = np.einsum("mq,mq->m", eps[mean][:, :, :3, 0].sum(axis=2), detJ[mean] * w) / (detJ[mean] @ w)
         nq = eps.shape[1]
         eps[mean] = with_mean_dilatation(eps[mean][..., 0].reshape(-1, 6), np.repeat(theta, nq)).reshape(
             -1, nq, 6, 1)
@@ -294,17 +303,12 @@ def cell_stress(cell_type, xe, ue, lmbda, mu, chunk=16384, kappa=None, rotation=
         G, _ = _gradients(cell_type, xe[c], np.atleast_2d(fem.CENTROID[cell_type]))
         H = np.matmul(G[:, 0].transpose(0, 2, 1), ue[c].reshape(-1, n, 3))      # H_kj = d u_j / d x_k
         eps = H.reshape(len(H), 9) @ _VOIGT_OF_GRADIENT                           # Voigt strain, as B u gives it
+        if kappa is not None:
+            mean = np.flatnonzero(np.broadcast_to(np.asarray(kappa, float), (m,))[c] > 0)
+            eps[mean] = with_mean_dilatation(eps[mean], mean_dilatation(cell_type, xe[c][mean], ue[c][mean]))
         out[c] = (elasticity_matrix(lmbda[c], mu[c]) @ eps[..., None])[..., 0]
         if rotation is not None:
             rotation[c] = 0.5 * np.abs(H - H.transpose(0, 2, 1)).reshape(len(H), 9).max(axis=1)
-    if kappa is not None:
-        kappa = np.broadcast_to(np.asarray(kappa, float), (m,))
-        mean = np.flatnonzero(kappa > 0)
-        for s in range(0, len(mean), chunk):
-            c = mean[s:s + chunk]
-            G, _ = _gradients(cell_type, xe[c], np.atleast_2d(fem.CENTROID[cell_type]))
-            div = np.einsum("cak,cak->c", G[:, 0], ue[c].reshape(-1, n, 3))
-            out[c, :3] += (kappa[c] * (mean_dilatation(cell_type, xe[c], ue[c]) - div))[:, None]
     return out
 
 

@@ -51,7 +51,8 @@ def box_lattices(scene):
         if np.any(np.asarray(spec.rotation, float) != 0.0):
             xe = xe @ rotation_matrix(spec.rotation).T
         lmbda, mu = elasticity.lame(body.material.youngs_modulus, body.material.poissons_ratio)
-        kappa = lmbda + 2.0 * mu / 3.0 if body.material.volumetric == "mean_dilatation" else 0.0
+        kappa = elasticity.mean_dilatation_bulk(body.material.youngs_modulus, body.material.poissons_ratio,
+                                                body.material.volumetric)
         Ke = elasticity.stiffness("hex", xe[None], lmbda, mu, kappa=kappa)[0]
         out.append(BoxLattice(offset, tuple(int(v) for v in n), Ke))
         offset += out[-1].n_vertices

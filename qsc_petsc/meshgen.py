@@ -223,11 +223,13 @@ def _named_facets(mesh, entity_groups=None):
     entities = mesh.cell_data.get("gmsh:geometrical")
     tags = mesh.cell_data.get("gmsh:physical")
     if entity_groups is not None and entities is not None:
+        # every physical group of faces, named or not: meshio's cell_sets of the named ones would add them again
         for block, e in zip(mesh.cells, entities):
             if block.dim == 2 and len(e):
                 for tag in entity_groups.get(int(e[0]), ()):
                     groups.setdefault(names.get(int(tag), f"surface{tag}"), []).append((block.type, block.data))
-    elif tags is not None:
+        return groups
+    if tags is not None:
         for block, t in zip(mesh.cells, tags):
             if block.dim == 2:
                 for tag in np.unique(t):

@@ -94,8 +94,7 @@ class ResultWriter:
         self.mesh, self.comm = mesh, mesh.comm
         self.directory = Path(directory)
         self.enabled = write_xdmf
-        self.steps = []
-        self.grids = {}          # step -> its grid in solution.xdmf's collection
+        self.grids = {}          # step -> its grid in solution.xdmf's collection, in the order written
         self.own_v = np.flatnonzero(mesh.owned)
         if not self.enabled:
             return
@@ -137,7 +136,7 @@ class ResultWriter:
                         del h5[key]
                     h5[key] = data
             fields = [(center, name, data.shape) for (center, name), data in gathered.items()]
-            self.steps = [s for s in self.steps if s[0] != step] + [(step, time, fields)]
+            self.grids.pop(step, None)
             self.grids[step] = self._grid(step, time, fields, "solution.h5")
             self._write_xml(step, time, fields)
         write_on_root(self.comm, self.directory / "solution.h5", write)
@@ -170,7 +169,7 @@ class ResultWriter:
         tail = "\n</Domain>\n</Xdmf>\n"
         _atomic_write(self.directory / "solution.xdmf",
                       head + '<Grid Name="load_steps" GridType="Collection" CollectionType="Temporal">\n'
-                      + "\n".join(self.grids[s] for s, _, _ in self.steps) + "\n</Grid>" + tail)
+                      + "\n".join(self.grids.values()) + "\n</Grid>" + tail)
         _atomic_write(self.directory / "steps" / f"step_{step:04d}.xdmf",
                       head + self._grid(step, time, fields, "../solution.h5", with_time=False) + tail)
 

@@ -637,10 +637,8 @@ class ContactModel:
         lines = []
         X = self.mesh.coords
         for dd in self.dies:
-            depth = _die_depth(dd, X, 0.0 * X, 0.0)
-            n = np.asarray(dd["spec"].normal, dtype=float)
-            turned = facing_pairs(nodal_normals(self.mesh, dd["surface"], X, by="angle"), n)   # as _die_rows
-            on = _on_die(dd, depth, self.scene.solver.active_set_tolerance)
+            on = _on_die(dd, _die_depth(dd, X, 0.0 * X, 0.0), self.scene.solver.active_set_tolerance)
+            turned = _turned_to_die(self.mesh, dd, X)
             away = self.comm.allreduce(int((~turned & on & self.mesh.owned[dd["nodes"]]).sum()), op=MPI.SUM)
             if away:
                 lines.append(f"die[{dd['index']}] {dd['spec'].name}: {away} node(s) of its surfaces lie on or past its "
@@ -743,7 +741,7 @@ class ContactModel:
                 # body's whole skin as the die's surface gave the nodes of its sides rows and the edge nodes the
                 # sides' areas (the contact area 1.5 for a 1 m2 face)
                 S = dd["surface"]
-                turned = facing_pairs(nodal_normals(mesh, S, X + U, by="angle"), n)
+                turned = _turned_to_die(mesh, dd, X + U)
                 within = -_die_depth(dd, X, U, t) <= dd["radius"]
                 near = within & turned
                 dd["near"] = near                   # the nodes with rows (missed)
@@ -1390,6 +1388,12 @@ class ContactModel:
         for term in self.current:
             term.destroy()
         self.current = []
+
+
+def _turned_to_die(mesh, dd, x):
+    """Which of a die's nodes (dd["nodes"]) have a surface turned towards the die at positions x (search.FACING, the
+    die's normal as the other surface's): the nodes a die's rows may hold."""
+    return facing_pairs(nodal_normals(mesh, dd["surface"], x, by="angle"), np.asarray(dd["spec"].normal, dtype=float))
 
 
 def _soft_penalty(name, deepest, h, scale, alpha, eps_n, other):
