@@ -18,7 +18,7 @@ from .mesh import check_cells, distribute_mesh, on_root
 from .output import ResultWriter, check_output_folder, clear_results, write_json, write_on_root
 from .restraint import Restraint, describe
 from .scene import PETSC_DEFAULTS
-from .solver import AUGMENTED_ROUND_OFF, ROUND_OFF_WARNING, System, solve_load_step
+from .solver import AUGMENTED_ROUND_OFF, FLOOR_STRAIN, ROUND_OFF_WARNING, System, solve_load_step
 
 # Runs built and not yet destroyed, as weak references in creation order (the same order on every rank).
 _LIVE_RUNS = []
@@ -27,6 +27,10 @@ _LIVE_RUNS = []
 # (hunt33_3)
 LARGE_STRAIN = 0.05
 LARGE_ROTATION = 0.1       # rad
+# a step whose displacements stand within this share of round-off is said once (Run._round_off_share): loads that
+# strain the bodies ~1e-12 or less were solved to an absolute floor with no word, the patch pair's two_pass contact
+# force 5e-4 off at a strain of 1e-12 and 30x at 1e-15 (hunt33_3)
+ROUND_OFF_ANSWER = 1e-6
 
 
 @atexit.register      # registered after petsc4py's import, so it runs before petsc4py finalizes PETSc
@@ -314,6 +318,33 @@ class Run:
             return max(self.comm.allgather(local), key=lambda entry: entry[0])
         return (*largest(size), *largest(rotation))
 
+    @cached_property
+    def _reach(self):
+        """The model's farthest node from the origin and from the centre of its bounding box [m] (collective)."""
+        X = self.mesh.coords
+        low = np.min(self.comm.allgather(X.min(axis=0, initial=np.inf)), axis=0)
+        high = np.max(self.comm.allgather(X.max(axis=0, initial=-np.inf)), axis=0)
+        far = self.comm.allreduce(float(np.abs(X).max(initial=0.0)), op=MPI.MAX)
+        return far, self.comm.allreduce(float(np.abs(X - 0.5 * (low + high)).max(initial=0.0)), op=MPI.MAX)
+
+    def _round_off_share(self, ul, t):
+        """How near the answer at load factor t stands to round-off, relative to its loads: the larger of the Newton
+        test's floor (rtol of the forces of a strain of FLOOR_STRAIN, which moves the nodes by ~rtol FLOOR_STRAIN
+        times the model's half-extent) and, with contact, the coordinates' precision eps |x| that the gaps stand on,
+        over the larger of the largest displacement |u| and the loads' own displacements (the dies' travel, and the
+        pressures' and prescribed displacements' forces as a strain over the half-extent: a die that travelled to
+        just touch leaves |u| round-off under loads that are not); 0 with no load. Then |u| and those two lengths
+        [m] (collective)."""
+        system = self.system
+        far, extent = self._reach
+        floor = system.snes.getTolerances()[0] * FLOOR_STRAIN * extent
+        coordinates = np.finfo(float).eps * far if self.contact is not None else 0.0
+        moved = self.comm.allreduce(float(np.abs(ul).max(initial=0.0)), op=MPI.MAX)
+        travel = max((t * float(np.linalg.norm(die.motion)) for die in self.scene.die), default=0.0)
+        forced = t * system.b_norm / system.force_floor * FLOOR_STRAIN * extent if system.force_floor > 0 else 0.0
+        loads = max(travel, forced)
+        return (max(floor, coordinates) / max(moved, loads) if loads > 0 else 0.0), moved, floor, coordinates
+
     def write_summary(self):
         self.summary["time"] = self.phases.summary()
         self.summary["peak_memory_mib"] = peak_memory_mib(self.comm)
@@ -344,6 +375,7 @@ class Run:
         before = None         # the converged state before u, (t, Vec): the predictor's path, the sticking dies' too
         last_loose = ""       # the last step's loose motions (Restraint.loose), warned when they change
         strained = False      # the large-strain warning said
+        coarse = False        # the round-off warning said
         try:
             for step in range(1, n_steps + 1):
                 t_prev, t = (step - 1) / n_steps, step / n_steps
@@ -369,6 +401,17 @@ class Run:
                                  f"rotations; past a few % (or 0.1 rad) its answer departs from a finite-strain "
                                  f"one's (a rotation stretches it by about its square over 2), and past 100 % "
                                  f"cells turn inside out. Read at the cells' centres")
+                    share, moved, floor, coordinates = self._round_off_share(ul, t)
+                    if share > ROUND_OFF_ANSWER and not coarse:
+                        coarse = True
+                        bound = (f"the coordinates' precision eps |x| ({coordinates:.3g} m, which the contact gaps "
+                                 f"stand on) and the Newton test's floor" if coordinates else "the Newton test's floor")
+                        self.log(f"step {step}: warning: the largest displacement is {moved:.3g} m, against which "
+                                 f"{bound} (rtol {self.system.snes.getTolerances()[0]:g} of the forces of a "
+                                 f"{FLOOR_STRAIN:g} strain, ~{floor:.3g} m) stand at {share:.2g}: loads this small are "
+                                 f"solved to round-off, not to the tolerance, and the answer may be off by about as "
+                                 f"much, more in stresses and contact forces. Pose the scene with larger loads (with no "
+                                 f"initial gaps, the linear answer scales with them)")
                     if self.contact is not None:
                         cpoint, record["contact"] = self.contact.report(u, ul)
                         point.update(cpoint)

@@ -473,6 +473,27 @@ def test_a_die_turned_away_from_its_surface_says_so(tmp_path):
         run_scene(path, tmp_path / "out", ["solver.max_cutbacks=1"])
 
 
+def test_a_die_on_surfaces_that_never_reach_it_says_where_the_body_went_through(tmp_path):
+    """A die acts on the surfaces it lists only: a floor given a body's top instead of its bottom let the body
+    through it with the die's force 0 and no word (hunt33_6: a sphere's pole 9.5 mm through). The run says how far
+    and on which surfaces the deepest node lies; the floor on the bottom presses it and says nothing."""
+    text = ('name = "through"\n[[bodies]]\nname = "b"\nmesh = { type = "box", origin = [0.0, 0.0, 0.0], size = '
+            '[1.0, 1.0, 1.0], cells = [3, 3, 3] }\nmaterial = { youngs_modulus = 1000.0 }\n[[boundary]]\n'
+            'surface = "b.zmax"\ntype = "displacement"\nux = 0.0\nuy = 0.0\nuz = -0.02\n[[die]]\nname = "floor"\n'
+            'point = [0.0, 0.0, 0.0]\nnormal = [0.0, 0.0, 1.0]\nsurfaces = ["b.{face}"]\n')
+    for face, said in (("zmax", [("die[0] floor: it presses none of its surfaces (b.zmax) while other nodes of its "
+                                 "bodies lie up to 0.02 m = 0.06 element sizes past its plane (the deepest near x, y, z "
+                                 "= 0, 0, 0, on b.xmin, b.ymin, b.zmin): a die acts on the surfaces it lists only")]),
+                       ("zmin", [])):
+        lines = []
+        run, summary = run_scene(_write(tmp_path, face, text.replace("{face}", face)), tmp_path / face,
+                                 log=lines.append)
+        run.destroy()
+        warnings = [line for line in lines if "warning" in line]
+        assert summary["status"] == "ok" and len(warnings) == len(said), lines
+        assert all(any(s in w for w in warnings) for s in said), lines
+
+
 def test_a_body_a_turned_die_leaves_free_names_the_die(tmp_path):
     """configs/two_cubes_dies.toml with its top die's normal the wrong way round: `qsc check` and the run stopped on
     "free rigid-body motion of upper ...: add a boundary condition", the die's warning never said (hunt33_5).

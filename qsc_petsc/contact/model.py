@@ -559,7 +559,8 @@ class ContactModel:
         self.unforced = {}         # per pair: the sides whose nodes its last report found sunk in with no force
         # per pair: (deepest pressed node, slave's pressed mean, their p / eps_n, |x|, the bodies' largest |u|) [m]
         self.pressed_depth = {}
-        self.die_depth = {}        # per die: (deepest node that carries force, its bodies' largest |u|) [m]
+        self.die_depth = {}        # per die: (deepest node that carries force, its bodies' largest |u|, its farthest node) [m]
+        self.through_die = {}      # per die pressing none of its surfaces: its bodies' nodes past its plane (_through_die)
         # per pair (report): the load factor of the search that made its rows, whether the last search kept an
         # earlier search's, the last search's _gap_change, and the searches of the last increment
         self.searches = {f"contact[{pd['index']}]": {"load_factor": 0.0, "gap_change": None, "kept": False, "count": 0}
@@ -1191,8 +1192,10 @@ class ContactModel:
             pressure = np.zeros(nvl)
             pressure[v] = (F[_owned_rows(mesh, v)] @ -n) / dd["area"]
             pressed = pressure[v] > 0
+            if "far" not in dd:
+                dd["far"] = self.comm.allreduce(float(np.abs(mesh.coords[v]).max(initial=0.0)), op=MPI.MAX)
             self.die_depth[dd["index"]] = (self.comm.allreduce(float(h[pressed].max(initial=0.0)), op=MPI.MAX),
-                                           float(moved[dd["bodies"]].max()))
+                                           float(moved[dd["bodies"]].max()), dd["far"])
             for name, nodes in dd["surfaces"]:       # a die adds to the pressure of the surfaces it presses
                 tractions.setdefault(name, np.zeros(nvl))[nodes] += pressure[nodes]
             # a node's area once: a sticking die's tangential rows (gated by its normal row) carry it too; the area
@@ -1200,6 +1203,10 @@ class ContactModel:
             # at 0 N (hunt31_2)
             normal = (term.active & (term.gate_of < 0 if term.gate_of is not None else True)
                       & (term.m.getArray(readonly=True)[term.rows] > 0))
+            if dd["index"] not in self.through_die and not self.comm.allreduce(bool(normal.any()), op=MPI.LOR):
+                through = self._through_die(dd, X, U)
+                if through:
+                    self.through_die[dd["index"]] = through
             summaries[f"die[{dd['index']}] {spec.name}"] = {
                 "rows": self.comm.allreduce(len(term.rows), op=MPI.SUM),
                 "active_rows": self.comm.allreduce(int(term.active.sum()), op=MPI.SUM),
@@ -1214,6 +1221,28 @@ class ContactModel:
         penetration[np.isinf(penetration)] = 0.0            # a node that faces nothing
         fields = {"contact_traction": traction, "contact_penetration": penetration, "contact_status": status}
         return fields, summaries
+
+    def _through_die(self, dd, X, U):
+        """For a die that presses none of its surfaces: how far the other nodes of its bodies lie past its plane at
+        the load factor of the report, if more than UNFORCED_WARNING x its element size, with the deepest node's
+        place and surfaces; else None (collective). A sphere's floor given the sphere's top instead of its contact
+        cap let the pole 9.5 mm through it, the die's force 0 and no word (hunt33_6)."""
+        mesh = self.mesh
+        nodes = np.flatnonzero(np.isin(mesh.vertex_body, dd["bodies"]) & mesh.owned)
+        depth = _die_depth(dict(dd, nodes=nodes), X, U, self.t)
+        tie = 1e-9 * dd["h"]          # of nodes as deep, the first by x, y, z: the same on any number of ranks
+        local = (-np.inf, [], [])
+        if len(nodes):
+            level = np.flatnonzero(depth >= depth.max() - tie)
+            k = level[np.lexsort(X[nodes[level]].T[::-1])[0]]
+            bodies = {self.scene.bodies[b].name for b in dd["bodies"]}
+            named = [name for name in mesh.surface_names if name.split(".", 1)[0] in bodies
+                     and np.isin(nodes[k], mesh.surface_vertices(name))]
+            local = (float(depth[k]), X[nodes[k]].tolist(), named)
+        entries = self.comm.allgather(local)
+        top = max(entry[0] for entry in entries)
+        deepest, where, named = min((entry for entry in entries if entry[0] >= top - tie), key=lambda entry: entry[1])
+        return (deepest, where, named) if deepest > UNFORCED_WARNING * dd["h"] else None
 
     def _pressed_areas(self, S, X, U, found, F):
         """The areas and normals of S's owned nodes on the faces turned towards the other surface (facing_areas):
@@ -1332,12 +1361,13 @@ class ContactModel:
                     f"{cure}. Or their rows were searched before they slid there: use more load steps or sliding = "
                     f"\"large\"")
             deepest, mean, expected, far, scale = self.pressed_depth.get(pd["index"], (0.0,) * 5)
+            precision = ROUND_OFF_PENETRATION * np.finfo(float).eps * far
             if spec.enforcement == "penalty" and (name, "deep") not in self.slip_warned:
-                line = _soft_penalty(name, deepest, pd["h_eff"], scale, spec.penalty, pd["eps_n"], "the other surface")
+                line = _soft_penalty(name, deepest, pd["h_eff"], scale, spec.penalty, pd["eps_n"], "the other surface",
+                                     precision)
                 if line:
                     self.slip_warned.add((name, "deep"))
                     lines.append(line)
-            precision = ROUND_OFF_PENETRATION * np.finfo(float).eps * far
             # a pressure of a strain below 1e-10 (p / E = alpha p / (eps_n h_eff)) is itself round-off: rows that hold
             # a loose stack with no load carry 1e-11 Pa
             strain = expected * spec.penalty / pd["h_eff"]
@@ -1357,8 +1387,19 @@ class ContactModel:
                              f"configuration: use sliding = \"finite\" for this scene")
         for dd in self.dies:
             name, spec = f"die[{dd['index']}]", dd["spec"]
-            deepest, scale = self.die_depth.get(dd["index"], (0.0, 0.0))
-            line = _soft_penalty(name, deepest, dd["h"], scale, spec.penalty, dd["eps_n"], "the die")
+            through = self.through_die.get(dd["index"])
+            if through and (name, "through") not in self.slip_warned:
+                self.slip_warned.add((name, "through"))
+                deepest, where, named = through
+                listed = ", ".join(s for s, _ in dd["surfaces"])
+                lines.append(f"{name} {spec.name}: it presses none of its surfaces ({listed}) while other nodes of its "
+                             f"bodies lie up to {deepest:.3g} m = {deepest / dd['h']:.2g} element sizes past its plane "
+                             f"(the deepest near x, y, z = {', '.join(f'{v:.4g}' for v in where)}"
+                             + (f", on {', '.join(named)}" if named else "") + "): a die acts on the surfaces it lists "
+                             "only, and the others go through it; list the surface that faces it")
+            deepest, scale, far = self.die_depth.get(dd["index"], (0.0,) * 3)
+            line = _soft_penalty(name, deepest, dd["h"], scale, spec.penalty, dd["eps_n"], "the die",
+                                 ROUND_OFF_PENETRATION * np.finfo(float).eps * far)
             if line and (name, "deep") not in self.slip_warned:
                 self.slip_warned.add((name, "deep"))
                 lines.append(line)
@@ -1396,10 +1437,12 @@ def _turned_to_die(mesh, dd, x):
     return facing_pairs(nodal_normals(mesh, dd["surface"], x, by="angle"), np.asarray(dd["spec"].normal, dtype=float))
 
 
-def _soft_penalty(name, deepest, h, scale, alpha, eps_n, other):
+def _soft_penalty(name, deepest, h, scale, alpha, eps_n, other, precision):
     """The warning line for a pair's or die's penalty rows whose pressed nodes sink deeper than DEEP_PENETRATION x
-    their element size or SOFT_PENALTY x the largest displacement of their bodies (scale), else None."""
-    if not (deepest > DEEP_PENETRATION * h or deepest > SOFT_PENALTY * scale > 0):
+    their element size or SOFT_PENALTY x the largest displacement of their bodies (scale), else None; none
+    within `precision` (m: ROUND_OFF_PENETRATION x eps |x|), where the depths are round-off (a load straining the
+    patch pair 1e-15 read 0.099 of its displacement as a soft penalty)."""
+    if deepest <= precision or not (deepest > DEEP_PENETRATION * h or deepest > SOFT_PENALTY * scale > 0):
         return None
     return (f"{name}: pressed nodes penetrate {other} by up to {deepest:.3g} m = {deepest / h:.2g} element sizes and "
             f"{deepest / max(scale, 1e-300):.2g} of the bodies' largest displacement: its penalty (alpha {alpha:g}, "
