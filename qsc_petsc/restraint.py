@@ -29,13 +29,17 @@ LOOSE_SHARE = 1e-9
 LOOSE_ROUND_OFF = 100.0
 
 
+def null_motions(gram):
+    """An orthonormal basis (6 nb, k) of the motions a Gram matrix B^T B (6 nb, 6 nb) leaves free."""
+    gram = np.asarray(gram, dtype=float)
+    w, vec = np.linalg.eigh(0.5 * (gram + gram.T))
+    top = max(float(w.max(initial=0.0)), 0.0)
+    return vec[:, w <= FREE_TOL * top] if top > 0 else np.eye(len(gram))
+
+
 def free_motions(gram, body_names):
     """The free motions of a Gram matrix B^T B (6 nb, 6 nb): {body name: [mode names]}, empty if all are held."""
-    gram = np.asarray(gram, dtype=float)
-    gram = 0.5 * (gram + gram.T)
-    w, vec = np.linalg.eigh(gram)
-    top = max(float(w.max(initial=0.0)), 0.0)
-    null = vec[:, w <= FREE_TOL * top] if top > 0 else np.eye(len(gram))
+    null = null_motions(gram)
     if null.shape[1] == 0:
         return {}
     share = np.linalg.norm(null, axis=1).reshape(len(body_names), 6)
@@ -101,10 +105,9 @@ class Restraint:
             self.Rmat.assemble()
         return self.Rmat
 
-    def free(self, terms, active_only, masks=None):
-        """Free motions under the boundary conditions and the terms' rows (all existing rows, only the active
-        ones, or per term those a boolean mask over its rows keeps): {body name: [mode names]}, the same on every
-        rank (collective)."""
+    def _gram(self, terms, active_only, masks=None):
+        """B^T B of the boundary conditions' and the terms' rows (all existing rows, only the active ones, or per
+        term those a boolean mask over its rows keeps), over all ranks (collective)."""
         gram = self.gram_bc.copy()
         for i, term in enumerate(terms):
             keep = (masks[i] if masks is not None else term.active if active_only
@@ -113,7 +116,25 @@ class Restraint:
             gram += block.T @ block
         total = np.empty_like(gram)
         self.comm.Allreduce(gram, total, op=MPI.SUM)
-        return free_motions(total, self.names)
+        return total
+
+    def free(self, terms, active_only, masks=None):
+        """Free motions under the boundary conditions and the terms' rows (_gram): {body name: [mode names]}, the
+        same on every rank (collective)."""
+        return free_motions(self._gram(terms, active_only, masks), self.names)
+
+    def free_load(self, terms, r):
+        """The largest force [N] that r (a residual Vec) puts on a motion the boundary conditions and the terms'
+        active rows leave free, 0 if none is (collective). A body pulled off its only support carries the pull
+        there; one floating between open rows with no load on it, round-off: an equilibrium, one of many
+        (Restraint.loose names it), which a solve on 2 ranks failed and on 1 rank converged to (hunt32_1)."""
+        null = null_motions(self._gram(terms, True))
+        if null.shape[1] == 0:
+            return 0.0
+        R = self._motion_matrix().getDenseArray()          # this rank's owned dofs, every body's motions
+        q = R.T @ r.getArray(readonly=True)
+        self.comm.Allreduce(MPI.IN_PLACE, q, op=MPI.SUM)
+        return float(np.abs(null.T @ q).max())
 
     def _motions(self, term):
         """(G_r v) / W_r of the term's existing rows r for every motion v: (rows, 6 nb), made once per term

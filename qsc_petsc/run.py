@@ -218,6 +218,7 @@ class Run:
             self.n_constrained = comm.allreduce(len(self.bc_dofs), op=MPI.SUM)
             self.restraint = Restraint(mesh, self.bc_dofs, u)
             self.system.free_motions = lambda terms, active: describe(self.restraint.free(terms, active))
+            self.system.free_load = self.restraint.free_load
         self.writer = ResultWriter(mesh, self.out, scene.output.xdmf)
         path = self.out / "scene.resolved.toml"
         write_on_root(comm, path, lambda: path.write_text(scene.to_toml()))

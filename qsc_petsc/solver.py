@@ -449,8 +449,9 @@ class System:
         self.force_scale = 0.0     # max(|K u|, t |b|, force_floor) on the free dofs at the last residual: the Newton test's scale
         self.prev_active = None
         # free_motions(terms, active_only) -> "" or the rigid motions the boundaries and rows leave free
-        # (restraint.Restraint); a solve never converges to an active set that leaves a body free
-        self.free_motions = None
+        # (restraint.Restraint); a solve never converges to an active set that leaves a body free with a load on
+        # it: free_load(terms, r) -> the largest force the residual r puts on those motions (None: any is loaded)
+        self.free_motions = self.free_load = None
         self.free_now = self.free_seen = ""
         # active-set cycling guard (_converged, _damp): the active sets this solve has met, {signature: last
         # iteration}, and the iteration from which Newton steps are damped (None: full steps)
@@ -804,7 +805,10 @@ class System:
             self.free_now = self.free_motions(self.terms, True)
             self.free_seen = self.free_now or self.free_seen
         if changed == 0 and not first:
-            if self.free_now:
+            # ... but a body floating with nothing on it between open rows is an equilibrium (one of many, said by
+            # the run): its iterations go on, the Jacobian singular along a motion the residual does not load
+            if self.free_now and (self.free_load is None or
+                                  self.free_load(self.terms, snes.getFunction()[0]) > rtol * self.force_scale):
                 return PETSc.SNES.ConvergedReason.DIVERGED_JACOBIAN_DOMAIN
             if fnorm <= atol:
                 return PETSc.SNES.ConvergedReason.CONVERGED_FNORM_ABS

@@ -494,6 +494,19 @@ def test_a_die_on_surfaces_that_never_reach_it_says_where_the_body_went_through(
         assert all(any(s in w for w in warnings) for s in said), lines
 
 
+def test_a_die_started_inside_its_body_says_so_not_its_normal():
+    """configs/two_cubes_dies.toml's top die on the upper cube's whole skin, started 0.15 m (1.3 elements) into it:
+    the sides' nodes past its plane were said to need the normal's sign checked; the normal is right, the die
+    starts inside (hunt33_6). The answer is the top face's alone."""
+    skin = '["upper.xmin","upper.xmax","upper.ymin","upper.ymax","upper.zmin","upper.zmax"]'
+    scene = load_scene(CONFIGS / "two_cubes_dies.toml", [f"die.1.surfaces={skin}", "die.1.point=[0,0,1.85]"])
+    lines = contact_plan(distribute_mesh(scene, MPI.COMM_WORLD), scene)
+    assert any(line.startswith("warning: die[1] top: 36 node(s) of its surfaces lie on or past its plane with faces "
+                               "turned away from it, and no row: the die starts 0.15 m = 1.3 element sizes into the "
+                               "body") for line in lines), lines
+    assert not any("sign of its normal" in line for line in lines), lines
+
+
 def test_a_body_a_turned_die_leaves_free_names_the_die(tmp_path):
     """configs/two_cubes_dies.toml with its top die's normal the wrong way round: `qsc check` and the run stopped on
     "free rigid-body motion of upper ...: add a boundary condition", the die's warning never said (hunt33_5).
