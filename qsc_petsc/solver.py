@@ -127,7 +127,9 @@ class ConstraintTerm:
         self.gate_of = gate_of                            # per existing row: position of its gate row, or -1
         self.augmented = augmented
         self.augmented_tolerance = None         # the Uzawa loop's end: its pair's (set by the contact model)
-        self.pressure_floor = 0.0     # next_multipliers' smallest pressure scale (set by the contact model)
+        # the pressure of a strain of FLOOR_STRAIN on its bodies (set by the contact model): next_multipliers' smallest
+        # pressure scale, and Restraint.loose's
+        self.pressure_floor = 0.0
         self.lmbda = np.zeros(len(self.rows)) if augmented else None
         self.c = G.createVecLeft()
         self.m = G.createVecLeft()
@@ -646,6 +648,14 @@ class System:
             fc.getArray()[self.bc_local] = 0.0
             f.axpy(1.0, fc)
             fc.destroy()
+
+    def own_force_scale(self, u):
+        """max(|K u|, t |b|) on the free dofs at u: the Newton test's force scale without its floor (collective)."""
+        f = self.K.createVecLeft()
+        self.K.mult(u, f)
+        scale = max(self._free_norm(f), self.t * self.b_norm)
+        f.destroy()
+        return scale
 
     def _free_norm(self, v):
         """The 2-norm of v's entries on the free (not Dirichlet) dofs (collective)."""
@@ -1327,6 +1337,12 @@ def solve_load_step(system, step, t_prev, t_target, u, update_terms, max_cutback
                 why = (f"; each linear solve was one application of pc_type {single} (ksp_type preonly), not a "
                        f"solve: the Newton steps were not the Jacobian's (preonly needs an exact factorization, "
                        f"-qsc_pc_type lu or cholesky; or leave ksp_type to qsc)")
+            if stats["snes_reason"] == "DIVERGED_INNER" and not system.ksp_atol_auto:
+                # newtontr's step from a linear solve that -qsc_ksp_atol stopped at once (the residual below it):
+                # no step the trust region can take; each option alone converges (hunt33_5)
+                why = ("; the trust region's linear solve stopped on -qsc_ksp_atol, which its residual was below "
+                       "already, and left it no step to take: lower -qsc_ksp_atol, or leave it to qsc, which sets "
+                       "the Krylov stop below the Newton target")
             if stats.get("linear_short"):
                 why = ("; a linear solve stopped with its residual far above the Newton target and its step no "
                        "correction (-qsc_ksp_atol above the residual, or -qsc_ksp_rtol near 1): lower them, or "

@@ -482,8 +482,8 @@ def test_a_die_on_surfaces_that_never_reach_it_says_where_the_body_went_through(
             'surface = "b.zmax"\ntype = "displacement"\nux = 0.0\nuy = 0.0\nuz = -0.02\n[[die]]\nname = "floor"\n'
             'point = [0.0, 0.0, 0.0]\nnormal = [0.0, 0.0, 1.0]\nsurfaces = ["b.{face}"]\n')
     for face, said in (("zmax", [("die[0] floor: it presses none of its surfaces (b.zmax) while other nodes of its "
-                                 "bodies lie up to 0.02 m = 0.06 element sizes past its plane (the deepest near x, y, z "
-                                 "= 0, 0, 0, on b.xmin, b.ymin, b.zmin): a die acts on the surfaces it lists only")]),
+                                 "bodies lie up to 0.02 m = 0.06 of its surfaces' element size past its plane (the deepest at x, y, z "
+                                 "= 0, 0, 0 before the load, on b.xmin, b.ymin, b.zmin): a die acts on the surfaces it lists only")]),
                        ("zmin", [])):
         lines = []
         run, summary = run_scene(_write(tmp_path, face, text.replace("{face}", face)), tmp_path / face,
