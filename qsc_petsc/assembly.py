@@ -856,7 +856,12 @@ def slip_modes(mesh, template, surfaces, held_dofs):
     blocks = []
     for body in sorted(weights):
         mine = in_body[body]
-        fields = elasticity.rigid_motions(_centred(comm, mesh.coords[owned_v[mine]]))
+        # rotations about the centroid at unit speed at the body's farthest point, as translations are: in metres
+        # they scaled with the body, and at 1e6 m (or 1e-6) half the modes fell under preconditioner.COARSE_CUTOFF
+        # (flat_punch: 1-3 more Krylov iterations; hunt34_1)
+        x = _centred(comm, mesh.coords[owned_v[mine]])
+        radius = comm.allreduce(float(np.linalg.norm(x, axis=1).max(initial=0.0)), op=MPI.MAX)
+        fields = elasticity.rigid_motions(x / (radius or 1.0))
         fields *= weights[body][mine][None, :, None]
         cols = (rows[mine][:, None] + np.arange(3)).ravel()
         values = fields.reshape(6, -1)

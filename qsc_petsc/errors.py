@@ -23,6 +23,16 @@ class ConvergenceError(QscError):
     """A solve failed; the message names the reason, the load step and the iteration counts."""
 
 
+def folder_error(key, directory, exc):
+    """The line for a folder mkdir could not make (OSError exc): a file of its name said. is_file() itself raised
+    on a name too long for the file system, a traceback and exit 1 (hunt34_3)."""
+    try:
+        what = " (a file of that name is there)" if directory.is_file() else ""
+    except OSError:
+        what = ""
+    return f"{key}: cannot create the folder {str(directory)!r}: {exc.strerror}{what}"
+
+
 def petsc_detail(exc):
     """PETSc's own account of a PETSc.Error, from the traceback its text carries: the innermost routine and the
     specific message, e.g. "KSPSetType(): Unable to find requested KSP type nonexist"; "a routine PETSc did not

@@ -214,6 +214,21 @@ def _gmsh41_surface_groups(path, binary, data_size):
     return None
 
 
+def _shared_physical_names(path):
+    """{(dimension, name): [tags]} of the names a gmsh file's $PhysicalNames section gives to several groups of one
+    dimension (the section is text in ascii and binary files alike). meshio keys them by name: all but one group
+    went, a top face's pressure with it, exit 0 (hunt34_3)."""
+    seen = {}
+    with open(path, "rb") as f:
+        for line in f:
+            if line.strip() == b"$PhysicalNames":
+                for _ in range(int(f.readline())):
+                    dim, tag, name = f.readline().decode("utf-8", "replace").split(maxsplit=2)
+                    seen.setdefault((int(dim), name.strip().strip('"')), []).append(int(tag))
+                break
+    return {key: tags for key, tags in seen.items() if len(tags) > 1}
+
+
 def _named_facets(mesh, entity_groups=None):
     """Surface groups of a meshio mesh: {name: [(meshio cell type, facet node array), ...]}. entity_groups: a
     gmsh 4.1 file's {surface entity: [physical tags]} (_gmsh41_surface_groups), which meshio's
@@ -273,6 +288,12 @@ def read_mesh_file(path, scale=1.0):
         raise MeshError(f"cannot read mesh file {path}: {reason}") from None
     if printed.getvalue().strip():
         sys.stdout.write(printed.getvalue())  # meshio's warnings on a successful read
+    shared = _shared_physical_names(path) if gmsh is not None else {}
+    if shared:
+        (dim, name), tags = next(iter(shared.items()))
+        raise MeshError(f"mesh file {path}: the physical name {name!r} is given to {dim}-D groups "
+                        f"{', '.join(map(str, tags))}, of which a reader keeps one: give each group a name of its own, "
+                        f"or make them one group")
     found = {}
     for block in mesh.cells:
         if block.dim == 3:

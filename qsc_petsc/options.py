@@ -185,7 +185,7 @@ def unread_option(name):
 def value_error(name, value):
     """Why option `name` (without its dash) cannot take `value` (a string, None for no value), or None: a
     -qsc_*_rtol / _atol / _stol / _divtol or _max_it option with no value, a negative or infinite number, a
-    Newton solve's ksp_rtol of 1 or more, or its snes_max_it / ksp_max_it of 0. A value that is no number is left to PETSc, whose message names it.
+    Newton solve's ksp_rtol, snes_rtol or snes_stol of 1 or more, or its snes_max_it / ksp_max_it of 0. A value that is no number is left to PETSc, whose message names it.
     Needs no PETSc (qsc sweep checks its runs' values with it before the first)."""
     kind = re.search(r"_(rtol|atol|stol|divtol|max_it)$", name) if name.startswith(PREFIX) else None
     if kind is None:
@@ -201,6 +201,11 @@ def value_error(name, value):
         return None
     if not number >= 0 or (not integer and number == float("inf")):
         return f"-{name}: must be {'an integer' if integer else 'a finite number'} >= 0, got {value!r}"
+    if name in (f"{PREFIX}snes_rtol", f"{PREFIX}snes_stol") and number >= 1:
+        # the Newton test then passes before the answer: snes_rtol 10 left the bodies at rest, snes_stol 1 with a
+        # loose linear solve 9 % off, each "ok" (hunt34_3)
+        return (f"-{name}: must be below 1 (at {value} the Newton test passes before the answer is reached), "
+                f"got {value!r}")
     if name == f"{PREFIX}ksp_rtol" and number >= 1:      # the Newton solve's (the band's is a direct solve)
         # every linear solve then stops before its first iteration: zero Newton steps, which the step test
         # took for a converged solve (the two cubes never moved, exit 0; hunt30_6)
@@ -223,6 +228,11 @@ def check_options():
 
     from .errors import SceneError
     for name, value in options_in_effect().items():
+        if name in _COMMAND_LINE and "=" in name:
+            # PETSc reads -qsc_pc_type=lu as an option named "qsc_pc_type=lu" with no value: the run went on with
+            # the defaults, -qsc_ksp_rtol=2 (refused as -qsc_ksp_rtol 2) too (hunt34_3)
+            key, _, given = name.partition("=")
+            raise SceneError(f"-{name}: PETSc options take their value after a space: write -{key} {given}")
         unread = unread_option(name) if name in _COMMAND_LINE else None
         if unread is not None:
             raise SceneError(unread)

@@ -13,7 +13,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from . import __version__, assembly, elasticity, lattice, options, preconditioner
-from .errors import OutputError, QscError, SceneError
+from .errors import OutputError, QscError, SceneError, folder_error
 from .mesh import check_cells, distribute_mesh, on_root
 from .output import ResultWriter, check_output_folder, clear_results, write_json, write_on_root
 from .restraint import Restraint, describe
@@ -124,16 +124,21 @@ def prepare_output(scene, out_dir, comm):
         try:
             directory.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
-            key = "--out" if out_dir else "output.directory"
-            what = " (a file of that name is there)" if directory.is_file() else ""
-            raise SceneError(f"{key}: cannot create the folder {str(directory)!r}: {exc.strerror}{what}") from None
+            raise SceneError(folder_error("--out" if out_dir else "output.directory", directory, exc)) from None
         check_output_folder(directory)
+    on_root(comm, make)
+    return directory
+
+
+def replace_results(directory, comm):
+    """An earlier run's results in directory removed, once the run's set-up has passed (collective): a run
+    refused for its input (a mistyped PETSc option, a truncated mesh file) removed them first (hunt34_3)."""
+    def clear():
         try:
             clear_results(directory)
         except OSError as exc:
             raise OutputError(f"output: cannot remove the earlier run's {str(exc.filename)!r}: {exc.strerror}") from None
-    on_root(comm, make)
-    return directory
+    on_root(comm, clear)
 
 
 class Run:
@@ -157,9 +162,15 @@ class Run:
         _LIVE_RUNS[:] = [ref for ref in _LIVE_RUNS if ref() is not None] + [weakref.ref(self)]
 
     def _set_up_failed(self, exc):
-        """A set-up that stopped on bad input (a refused PETSc option, a bad mesh) still says so in its folder:
-        summary.json with status "failed" and the error, and petsc_options.txt (an earlier run's results in the
-        folder would otherwise read "ok"). Collective; a folder that cannot take them adds nothing to the error."""
+        """A set-up that stopped on bad input (a refused PETSc option, a bad mesh) says so in its folder when it
+        holds no earlier run's results: summary.json with status "failed" and the error, and petsc_options.txt.
+        An earlier run's results stay as they were (its summary says its own status), and the error says so.
+        Collective; a folder that cannot take them adds nothing to the error."""
+        earlier = self.comm.bcast((self.out / "summary.json").exists() if self.comm.rank == 0 else None, root=0)
+        if earlier:
+            exc.args = (f"{exc.args[0]} (the earlier results in {str(self.out)!r} are left as they were)",
+                        *exc.args[1:])
+            return
         summary = {"scene": self.scene.name, "status": "failed", "error": str(exc), "qsc_petsc": __version__,
                    "ranks": self.comm.size, "petsc_options": options.options_in_effect()}
         try:
@@ -222,6 +233,7 @@ class Run:
             self.restraint = Restraint(mesh, self.bc_dofs, u)
             self.system.free_motions = lambda terms, active: describe(self.restraint.free(terms, active))
             self.system.free_load = self.restraint.free_load
+        replace_results(self.out, comm)
         self.writer = ResultWriter(mesh, self.out, scene.output.xdmf)
         path = self.out / "scene.resolved.toml"
         write_on_root(comm, path, lambda: path.write_text(scene.to_toml()))

@@ -867,7 +867,8 @@ def load_scene(path: str | os.PathLike, overrides: Sequence[str] = ()) -> Scene:
     """Read, override and validate a scene TOML file."""
     path = Path(path)
     try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
+        # utf-8-sig: a file saved with a byte-order mark read "Invalid statement (line 1, column 1)" (hunt34_3)
+        data = tomllib.loads(path.read_text(encoding="utf-8-sig"))
     except FileNotFoundError:
         raise SceneError(f"{path}: scene file not found") from None
     except (OSError, UnicodeDecodeError) as exc:

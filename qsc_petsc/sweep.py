@@ -23,12 +23,13 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from .errors import QscError, SceneError
+from .errors import QscError, SceneError, folder_error
 from .options import PREFIX, split_petsc_args, unread_option, value_error
 
 EXIT_OK, EXIT_INPUT, EXIT_REFERENCE, EXIT_INTERRUPTED = 0, 2, 3, 130
 PHASES = ("mesh", "assembly", "search", "rows", "solve", "output")     # run.py's phases, in run order
 PETSC_KEY = re.compile(r"-[A-Za-z][A-Za-z0-9_]*")
+MAX_TIMEOUT = 1e6       # s (11.6 days): a run's --timeout; wait() takes at most ~2.1e6 (its poll's milliseconds)
 ERROR_COLUMNS = ("displacement_l2", "energy", "force", "max_penetration", "traction")
 
 
@@ -128,7 +129,7 @@ def build_parser():
     p.add_argument("--ranks-key", default="ranks", help="the --vary/--reference key giving the MPI rank count (default: ranks; without it every "
                                                          "run takes 1 rank)")
     p.add_argument("--timeout", type=float, default=None, metavar="SECONDS",
-                   help="stop a run after this wall time and record it as failed (default: no limit)")
+                   help="stop a run after this wall time, at most 1e6 s, and record it as failed (default: no limit)")
     return p
 
 
@@ -213,8 +214,11 @@ def make_plan(argv):
         if option in petsc_names:
             raise SweepInputError(f"{v.source!r}: {v.key} is also given as the PETSc option {option} for every "
                                   f"run, which takes precedence over the scene's [petsc] table")
-    if args.timeout is not None and not args.timeout > 0:
-        raise SweepInputError(f"--timeout: must be a positive number of seconds, got {args.timeout:g}")
+    if args.timeout is not None and not 0 < args.timeout <= MAX_TIMEOUT:
+        # inf or 1e7 s raised OverflowError in communicate() after the earlier sweep was removed, its reference
+        # run left going on alone (hunt34_3)
+        raise SweepInputError(f"--timeout: must be a positive number of seconds up to {MAX_TIMEOUT:g} (omit it for "
+                              f"no limit), got {args.timeout:g}")
     if args.out == "":
         raise SweepInputError("--out: an empty folder name (omit --out for results/<scene name>_sweep)")
     try:
@@ -578,8 +582,7 @@ def prepare_out(plan):
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
-        what = " (a file of that name is there)" if out.is_file() else ""
-        raise SweepInputError(f"--out: cannot create the folder {str(out)!r}: {exc.strerror}{what}") from None
+        raise SweepInputError(folder_error("--out", out, exc)) from None
     for name in (*TABLES, "reference"):
         path = out / name
         if path.exists() and path.is_dir() != (name == "reference"):

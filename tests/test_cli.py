@@ -477,6 +477,13 @@ def test_check_tries_the_solver_options(tmp_path):
     assert code == 0, out
 
 
+def test_check_evaluates_the_pressure_fields(tmp_path):
+    """qsc check said "valid" for a pressure field the run refuses (not finite on some face; hunt34_3)."""
+    code, out = qsc(["check", CONFIGS / "patch_test.toml", "--set", 'boundary.5.value="sqrt(0.9-x)"'])
+    assert code == 2 and own_lines(out)[-1].startswith("qsc: error: boundary[5].value: the pressure 'sqrt(0.9-x)' "
+                                                       "on upper.zmax is not finite on the face near"), out
+
+
 def test_check_finds_a_degenerate_cell(tmp_path):
     """qsc check called a mesh with a flat tet valid, which the run refuses (the assembly's test; hunt33_1): it makes
     the same test, with the run's line."""
@@ -695,6 +702,13 @@ def test_an_out_folder_that_is_a_file_names_the_flag(tmp_path):
     assert proc.returncode == 2
     assert proc.stdout.strip().splitlines()[-1] == (f"qsc: error: --out: cannot create the folder {str(path)!r}: "
                                                     "File exists (a file of that name is there)"), proc.stdout
+    # a name too long for the file system: the test for a file there raised again, a traceback and exit 1 (hunt34_3)
+    long = tmp_path / ("a" * 300)
+    proc = subprocess.run([sys.executable, "-m", "qsc_petsc.cli", "run", str(CONFIGS / "block_compression.toml"),
+                           "--out", str(long)], capture_output=True, text=True, timeout=120, check=False)
+    assert proc.returncode == 2 and "Traceback" not in proc.stdout + proc.stderr
+    assert proc.stdout.strip().splitlines()[-1] == (f"qsc: error: --out: cannot create the folder {str(long)!r}: "
+                                                    "File name too long"), proc.stdout
 
 
 def test_an_unprefixed_option_from_the_environment_is_left_alone(tmp_path):
@@ -749,7 +763,7 @@ def test_a_viewer_option_with_a_bad_value_is_an_input_error(tmp_path, option, ho
 
 @pytest.mark.parametrize("case", ["rtol 1", "atol above", "minres", "no cholesky", "value-less", "viewer file",
                                   "preonly jacobi", "no tolerance", "log_view file",
-                                  "no newton step"])
+                                  "no newton step", "snes rtol 10", "snes stol 1", "equals"])
 def test_solver_options_that_cannot_work_end_cleanly(tmp_path, case):
     """Options a PETSc user may try, each of which ended in a wrong answer with exit 0 or a traceback with exit 1
     (hunt30_6): -qsc_ksp_rtol 1 stops every linear solve before its first iteration, and the zero Newton steps
@@ -780,6 +794,11 @@ def test_solver_options_that_cannot_work_end_cleanly(tmp_path, case):
         "log_view file": (["-log_view", ":/nonexistent/f.txt"], 2, "a file that cannot be opened in -log_view"),
         # every try failed: 4 cutbacks, then "DIVERGED_MAX_IT after 0 iterations", exit 3 (session 33)
         "no newton step": (["-qsc_snes_max_it", "0"], 2, "-qsc_snes_max_it: must be at least 1 (at 0 no Newton step"),
+        # the Newton test passed before the answer: the bodies at rest, or 9 % off, "ok" (hunt34_3)
+        "snes rtol 10": (["-qsc_snes_rtol", "10"], 2, "-qsc_snes_rtol: must be below 1"),
+        "snes stol 1": (["-qsc_snes_stol", "1"], 2, "-qsc_snes_stol: must be below 1"),
+        # PETSc reads it as an option "qsc_pc_type=lu" with no value: the defaults ran, exit 0 (hunt34_3)
+        "equals": (["-qsc_pc_type=lu"], 2, "-qsc_pc_type=lu: PETSc options take their value after a space"),
     }[case]
     proc = subprocess.run([sys.executable, "-m", "qsc_petsc.cli", "run", str(CONFIGS / "block_compression.toml"),
                            "--out", str(tmp_path), *options], capture_output=True, text=True, timeout=120,
@@ -789,6 +808,18 @@ def test_solver_options_that_cannot_work_end_cleanly(tmp_path, case):
     assert "Traceback" not in proc.stderr + proc.stdout and "PETSC ERROR" not in proc.stderr + proc.stdout
     assert json.loads((tmp_path / "summary.json").read_text())["status"] == "failed"
     assert (tmp_path / "petsc_options.txt").exists()
+
+
+def test_a_large_snes_atol_still_takes_a_newton_step(tmp_path):
+    """-qsc_snes_atol above the first residual ended the solve before its first step: 0 Newton iterations,
+    CONVERGED_FNORM_ABS, the block's top reaction -53.8 N against -10, "ok" (hunt34_3). A step is taken first."""
+    proc = subprocess.run([sys.executable, "-m", "qsc_petsc.cli", "run", str(CONFIGS / "block_compression.toml"),
+                           "--out", str(tmp_path), "-qsc_snes_atol", "100"], capture_output=True, text=True,
+                          timeout=120, check=False)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert all(step["snes_iterations"] >= 1 for step in summary["steps"])
+    assert summary["steps"][-1]["reactions"]["boundary[3] block.zmax"][2] == pytest.approx(-10.0, rel=1e-6)
 
 
 BAND_OPTIONS = {

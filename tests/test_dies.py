@@ -494,6 +494,34 @@ def test_a_die_on_surfaces_that_never_reach_it_says_where_the_body_went_through(
         assert all(any(s in w for w in warnings) for s in said), lines
 
 
+def test_a_punch_approaching_a_shoulder_is_not_said_to_let_the_body_through(tmp_path):
+    """A die on an L-shaped body's shoulder, approaching across a gap: its plane has the body's tall part past it
+    from the start, by design, and the through-die warning named those nodes while the die approached, its advice
+    (list the surface that faces it) crushing the tall part (hunt34_2). Nodes past the plane at the start are not
+    counted; the die presses the shoulder at step 2 with no word."""
+    points = np.array([[i, j, k] for k in range(3) for j in range(2) for i in range(3)], dtype=float)
+
+    def at(i, j, k):
+        return i + 3 * j + 6 * k
+    cells = np.array([[at(i, 0, k), at(i + 1, 0, k), at(i + 1, 1, k), at(i, 1, k),
+                       at(i, 0, k + 1), at(i + 1, 0, k + 1), at(i + 1, 1, k + 1), at(i, 1, k + 1)]
+                      for i, k in ((0, 0), (1, 0), (0, 1))])
+    surfaces = {"shoulder": np.array([[at(1, 0, 1), at(2, 0, 1), at(2, 1, 1), at(1, 1, 1)]]),
+                "bottom": np.array([[at(i, 0, 0), at(i, 1, 0), at(i + 1, 1, 0), at(i + 1, 0, 0)] for i in (0, 1)])}
+    write_gmsh(tmp_path / "l.msh", points, cells, "hex", surfaces)
+    path = _write(tmp_path, "shoulder", 'name = "shoulder"\n[[bodies]]\nname = "l"\nmesh = { type = "file", path = '
+                  '"l.msh" }\nmaterial = { youngs_modulus = 1000.0 }\n[[boundary]]\nsurface = "l.bottom"\ntype = '
+                  '"displacement"\nux = 0.0\nuy = 0.0\nuz = 0.0\n[[die]]\nname = "punch"\npoint = [0.0, 0.0, '
+                  '1.02]\nnormal = [0.0, 0.0, -1.0]\nmotion = [0.0, 0.0, -0.03]\nsurfaces = ["l.shoulder"]\n'
+                  '[load]\nsteps = 2\n')
+    lines = []
+    run, summary = run_scene(path, tmp_path / "out", log=lines.append)
+    run.destroy()
+    assert summary["status"] == "ok" and not [line for line in lines if "warning" in line], lines
+    force = summary["steps"][-1]["contact"]["die[0] punch"]["force_on_bodies"][2]
+    assert summary["steps"][0]["contact"]["die[0] punch"]["active_rows"] == 0 and force < 0
+
+
 def test_a_die_started_inside_its_body_says_so_not_its_normal():
     """configs/two_cubes_dies.toml's top die on the upper cube's whole skin, started 0.15 m (1.3 elements) into it:
     the sides' nodes past its plane were said to need the normal's sign checked; the normal is right, the die

@@ -77,6 +77,24 @@ def test_loads_at_round_off_say_so(tmp_path):
             len(warnings) == (name != "touch"), lines
 
 
+def test_warnings_do_not_depend_on_the_length_unit_or_travel(tmp_path):
+    """The loose test read row pressures against a force floor in N: the patch test in lengths x 1e6 (all 64 rows
+    carrying the load) said "upper (translation z) ... one of many" (hunt34_1). The soft-penalty test read depths
+    against the bodies' largest displacement: the sliding cubes at alpha 0.3 (18 % low) were silent, the 0.3 m
+    slide hiding the depth (hunt34_2); against their deformation they say so."""
+    big = ["bodies.0.mesh.size=[1e6,1e6,5e5]", "bodies.1.mesh.origin=[0,0,5e5]", "bodies.1.mesh.size=[1e6,1e6,5e5]"]
+    for name, (scene, sets, expected) in {
+            "big": (CONFIGS / "patch_test.toml", big, []),
+            "slid": (CONFIGS / "sliding_cubes.toml", ["contact.0.penalty=0.3"], ["contact[0]: pressed nodes penetrate"]),
+    }.items():
+        lines = []
+        run, summary = run_scene(scene, tmp_path / name, sets, log=lines.append)
+        run.destroy()
+        warnings = [line for line in lines if "warning" in line]
+        assert summary["status"] == "ok" and len(warnings) == len(expected), lines
+        assert all(any(e in w for w in warnings) for e in expected) and "loose" not in summary["steps"][-1], lines
+
+
 def test_soft_dies_and_turned_bodies_say_so(tmp_path):
     """Runs that ended "ok" with no word (hunt33_6): dies at alpha 0.1 under configs/flat_punch.toml (the punch's
     force 45 % low: its nodes sank 0.37 and 0.52 of the bodies' largest displacement), the punch's pair at alpha 1

@@ -124,6 +124,20 @@ def test_read_mesh_file_round_trip(tmp_path, file_format):
     assert np.allclose(n[:, 0], [-1, 0, 0])
 
 
+@pytest.mark.parametrize("file_format", ["gmsh22", "gmsh"])
+def test_a_physical_name_given_to_two_groups_is_refused(tmp_path, file_format):
+    """meshio keys a file's physical names by name: of two surface groups named alike one went, a top face's
+    pressure with it, exit 0 (hunt34_3). The file is refused, naming the name and the groups."""
+    path = tmp_path / "body.msh"
+    _write_tet_mesh(path, file_format)
+    text = path.read_text()
+    names = text[text.index("$PhysicalNames"):text.index("$EndPhysicalNames")]
+    path.write_text(text.replace(names, names.replace('"top"', '"left"')))
+    with pytest.raises(MeshError, match=r"the physical name 'left' is given to 2-D groups 1, 2, of which a reader "
+                                        r"keeps one"):
+        read_mesh_file(path)
+
+
 def test_read_hex_file_unmirrors_cells(tmp_path):
     box = box_mesh(ORIGIN, SIZE, CELLS, "hex")
     cells = box.cells.copy()

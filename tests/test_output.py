@@ -353,7 +353,7 @@ def test_a_run_clears_an_earlier_runs_results_from_its_folder(tmp_path):
     run's solution.h5, solution.xdmf and steps/ (another scene's mesh and fields beside this run's summary); a
     set-up stopped by bad input left them and the old scene.resolved.toml; while step 1 ran, and for ever if
     the run died there, the folder showed the old summary.json as "ok". A run now removes the results a run
-    writes (and nothing else) when it starts, and writes a "running" summary at the end of its set-up."""
+    writes (and nothing else) once its set-up has passed, and writes a "running" summary then."""
     from qsc_petsc.errors import QscError
     from qsc_petsc.run import Run
     out = tmp_path / "out"
@@ -369,11 +369,19 @@ def test_a_run_clears_an_earlier_runs_results_from_its_folder(tmp_path):
     assert 'name = "patch_test"' in (out / "scene.resolved.toml").read_text()
     run, _ = run_scene(CONFIGS / "two_cubes_dies.toml", out)
     run.destroy()
-    with pytest.raises(QscError):
+    before = sorted(p.relative_to(out).as_posix() for p in out.rglob("*") if p.is_file())
+    # a run refused for its input leaves them as they were (it removed them first: a mistyped PETSc option cost
+    # the earlier solution; hunt34_3), and says so
+    with pytest.raises(QscError, match="the earlier results in .* are left as they were"):
         run_scene(CONFIGS / "patch_test.toml", out, ["petsc.pc_type=bogus"])
-    left = sorted(p.relative_to(out).as_posix() for p in out.rglob("*") if p.is_file())
-    assert left == ["notes.txt", "petsc_options.txt", "summary.json"]
-    assert json.loads((out / "summary.json").read_text())["status"] == "failed"
+    assert sorted(p.relative_to(out).as_posix() for p in out.rglob("*") if p.is_file()) == before
+    assert json.loads((out / "summary.json").read_text())["scene"] == "two_cubes_dies"
+    fresh = tmp_path / "fresh"           # a folder with no earlier results says the failure
+    with pytest.raises(QscError):
+        run_scene(CONFIGS / "patch_test.toml", fresh, ["petsc.pc_type=bogus"])
+    left = sorted(p.relative_to(fresh).as_posix() for p in fresh.rglob("*") if p.is_file())
+    assert left == ["petsc_options.txt", "summary.json"]
+    assert json.loads((fresh / "summary.json").read_text())["status"] == "failed"
     from mpi4py import MPI
     run = Run(load_scene(CONFIGS / "patch_test.toml"), MPI.COMM_WORLD, out, log=lambda *a: None)
     summary = json.loads((out / "summary.json").read_text())

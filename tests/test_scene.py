@@ -498,3 +498,11 @@ def test_weight_power_table_round_trips():
     assert scene.contact[0].integration == "gauss" and scene.contact[0].gauss_points == 4
     again = parse(tomllib.loads(scene.to_toml()))
     assert again.contact[0].weight.to_dict() == {"power": 3.0}
+
+
+def test_a_scene_saved_with_a_byte_order_mark_loads(tmp_path):
+    """A UTF-8 file with a byte-order mark (as some editors save it) read "Invalid statement (at line 1, column 1)"
+    (hunt34_3)."""
+    path = tmp_path / "bom.toml"
+    path.write_bytes(b"\xef\xbb\xbf" + (Path(__file__).parents[1] / "configs" / "patch_test.toml").read_bytes())
+    assert load_scene(path).name == "patch_test"

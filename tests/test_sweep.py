@@ -78,6 +78,9 @@ def test_pareto_front():
     (["--vary", "contact.0.penalty=1e2", "--reference", "bodies.7.mesh.cells=[2,2,2]"], "bodies[7]"),
     (["--vary", "petsc.pc_type=lu", "-qsc_pc_type", "lu", "--vary", "-qsc_pc_type=gamg,lu"], "-qsc_pc_type"),
     (["--vary", "contact.0.penalty=1e2,1e4", "--timeout", "-5"], "--timeout: must be a positive number"),
+    # an OverflowError in the wait, after the earlier sweep was removed (hunt34_3)
+    (["--vary", "contact.0.penalty=1e2,1e4", "--timeout", "inf"], "--timeout: must be a positive number of seconds up to"),
+    (["--vary", "contact.0.penalty=1e2,1e4", "--timeout", "1e7"], "--timeout: must be a positive number of seconds up to"),
     # a scene [petsc] value the command line overrides: every run alike, labelled apart (hunt32_3)
     (["--vary", "petsc.pc_type=gamg,hypre", "-qsc_pc_type", "lu"], "the PETSc option -qsc_pc_type for every run"),
     # values each run would refuse, refused before the first (hunt32_3)
