@@ -639,8 +639,12 @@ def surface_load(mesh, scene, template):
         pressure, values = _recording(compile_expression(bc.value)) if field else (bc.value, [])
         # a pressure field varies within faces: a 3-point rule per direction integrates it better than 2
         fe = fem.face_pressure_loads(mesh.face_type, mesh.coords[nodes], pressure, n_gauss=3 if field else 2)
-        _check_pressure_field(mesh, i, bc, values[0].reshape(len(nodes), -1) if values and len(nodes) else None,
-                              nodes)
+        if field and len(nodes):
+            # ... and at the faces' nodes: 1/x, infinite on an edge of the surface, passed at the quadrature points
+            # and its total load grew by ln 2 at each refinement (hunt34_3)
+            pressure(mesh.coords[nodes].reshape(-1, 3))
+        _check_pressure_field(mesh, i, bc, np.hstack([v.reshape(len(nodes), -1) for v in values])
+                              if values and len(nodes) else None, nodes)
         dofs = (3 * mesh.gvert[nodes][:, :, None] + np.arange(3)).ravel()
         f.setValues(dofs.astype(PETSc.IntType), fe.ravel(), addv=ADD)
     f.assemble()

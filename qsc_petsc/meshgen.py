@@ -1,6 +1,7 @@
 """Body meshes as plain arrays on one rank: structured boxes, meshio files, and their named boundary surfaces."""
 
 import io
+import os
 import sys
 from contextlib import redirect_stderr, redirect_stdout
 from dataclasses import dataclass, field
@@ -267,6 +268,9 @@ def read_mesh_file(path, scale=1.0):
     """
     import meshio  # only needed here
 
+    if os.path.isfile(path) and os.path.getsize(path) == 0:
+        # meshio's "need at least one array to concatenate" (hunt34_3)
+        raise MeshError(f"cannot read mesh file {path}: the file is empty")
     gmsh = _gmsh_format(path)
     if gmsh is not None and gmsh[0].startswith("4") and gmsh[0] != "4.1":
         # meshio reads 4.1 and 2.2: 4.0 failed with "not enough values to unpack" (hunt33_1)
@@ -308,6 +312,12 @@ def read_mesh_file(path, scale=1.0):
     if points.ndim != 2 or points.shape[1] != 3:
         raise MeshError(f"mesh file {path}: points must be 3D, got shape {points.shape}")
     cells = np.concatenate([b.data for b in mesh.cells if b.type == mtype]).astype(np.int64)
+    used = np.unique(cells)
+    wrong = used[~np.isfinite(points[used]).all(axis=1)]
+    if len(wrong):
+        # it went on to "bodies[0].mesh.scale: the body is nan across", which no scale cures (hunt34_3)
+        raise MeshError(f"mesh file {path}: {len(wrong)} point(s) of its cells have a coordinate that is not a finite "
+                        f"number, e.g. point {int(wrong[0])} (0-based, in the file's order): {points[wrong[0]].tolist()}")
     # gmsh's msh2 lists an element once per physical volume it belongs to: a cell counted twice would add its
     # stiffness twice (an inner region tagged apart inside the whole: 9.8 % off in displacement, no warning)
     _, first = np.unique(_row_ids(np.sort(cells, axis=1), len(points)), return_index=True)

@@ -235,6 +235,20 @@ class FolderName(Str):
         return "a folder name: no / or \\, not . or .."
 
 
+class Filled(Str):
+    """A string that is not empty nor blank: `output.directory = ""` wrote (and cleared) the results in the working
+    directory, and `die.name = ""` named its summary entry "die[0] " (hunt34_3)."""
+
+    def check(self, value, path):
+        value = super().check(value, path)
+        if not value.strip():
+            raise SceneError(f"{path}: must not be empty, got {_show(value)}")
+        return value
+
+    def range_text(self):
+        return "not empty"
+
+
 class SurfaceRef(Str):
     """A "body.surface" reference; whether the body exists is a cross check (see _cross_check)."""
 
@@ -555,7 +569,7 @@ CONTACT = Table({
 })
 
 DIE = Table({
-    "name": Str("Unique die name."),
+    "name": Filled("Unique die name."),
     "point": Vec3(Float(), "A point of the die's flat face.", unit="m"),
     "normal": Vec3(Float(), "Normal of the die face, pointing from the die toward the bodies (normalised here)."),
     "motion": Vec3(Float(), "Die displacement reached at the last load step, ramped linearly.", default=[0, 0, 0],
@@ -617,7 +631,7 @@ SCHEMA = Table({
     "petsc": Options(f"PETSc options without the {OPTIONS_PREFIX!r} prefix, nested tables joined by \"_\"; "
                      "merged over the defaults.", default=PETSC_DEFAULTS),
     "output": Table({
-        "directory": Str("Output folder; {name} is the scene name; relative to the working directory.",
+        "directory": Filled("Output folder; {name} is the scene name; relative to the working directory.",
                          default="results/{name}"),
         "xdmf": Bool("Write the solution as solution.xdmf/.h5.", default=True),
     }, "What is written, and where."),

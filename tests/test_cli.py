@@ -482,6 +482,9 @@ def test_check_evaluates_the_pressure_fields(tmp_path):
     code, out = qsc(["check", CONFIGS / "patch_test.toml", "--set", 'boundary.5.value="sqrt(0.9-x)"'])
     assert code == 2 and own_lines(out)[-1].startswith("qsc: error: boundary[5].value: the pressure 'sqrt(0.9-x)' "
                                                        "on upper.zmax is not finite on the face near"), out
+    # infinite on the surface's edge x = 0 only, which no quadrature point meets: its load grew by ln 2 a refinement
+    code, out = qsc(["check", CONFIGS / "patch_test.toml", "--set", 'boundary.5.value="1/x"'])
+    assert code == 2 and "the pressure '1/x' on upper.zmax is not finite on the face near x, y, z = 0.07143" in out
 
 
 def test_check_finds_a_degenerate_cell(tmp_path):

@@ -124,6 +124,25 @@ def test_read_mesh_file_round_trip(tmp_path, file_format):
     assert np.allclose(n[:, 0], [-1, 0, 0])
 
 
+def test_an_empty_file_and_a_point_not_finite_say_so(tmp_path):
+    """An empty file read "ValueError: need at least one array to concatenate", and a NaN coordinate was said of
+    the body's mesh.scale (hunt34_3)."""
+    path = tmp_path / "empty.msh"
+    path.write_text("")
+    with pytest.raises(MeshError, match="the file is empty"):
+        read_mesh_file(path)
+    path = tmp_path / "nan.msh"
+    _write_tet_mesh(path, "gmsh22")
+    text = path.read_text()
+    nodes = text.index("$Nodes")
+    first = text.index("\n", text.index("\n", nodes) + 1) + 1        # the first node's line
+    line = text[first:text.index("\n", first)].split()
+    path.write_text(text[:first] + " ".join([line[0], "nan", *line[2:]]) + text[text.index("\n", first):])
+    with pytest.raises(MeshError, match=r"1 point\(s\) of its cells have a coordinate that is not a finite number, "
+                                        r"e\.g\. point 0"):
+        read_mesh_file(path)
+
+
 @pytest.mark.parametrize("file_format", ["gmsh22", "gmsh"])
 def test_a_physical_name_given_to_two_groups_is_refused(tmp_path, file_format):
     """meshio keys a file's physical names by name: of two surface groups named alike one went, a top face's

@@ -2,6 +2,7 @@
 
 import copy
 import pickle
+import re
 import subprocess
 import sys
 import tomllib
@@ -506,3 +507,12 @@ def test_a_scene_saved_with_a_byte_order_mark_loads(tmp_path):
     path = tmp_path / "bom.toml"
     path.write_bytes(b"\xef\xbb\xbf" + (Path(__file__).parents[1] / "configs" / "patch_test.toml").read_bytes())
     assert load_scene(path).name == "patch_test"
+
+
+@pytest.mark.parametrize("key", ["output.directory", "die.0.name"])
+def test_an_empty_folder_or_die_name_is_refused(key):
+    """output.directory = "" wrote (and cleared) the results in the working directory; a die named "" had the
+    summary entry "die[0] " (hunt34_3)."""
+    where = key.replace(".0.", "[0].")
+    with pytest.raises(SceneError, match="^" + re.escape(f'{where}: must not be empty, got ""')):
+        load_scene(Path(__file__).parents[1] / "configs" / "two_cubes_dies.toml", [f'{key}=""'])
