@@ -185,7 +185,8 @@ def unread_option(name):
 def value_error(name, value):
     """Why option `name` (without its dash) cannot take `value` (a string, None for no value), or None: a
     -qsc_*_rtol / _atol / _stol / _divtol or _max_it option with no value, a negative or infinite number, a
-    Newton solve's ksp_rtol, snes_rtol or snes_stol of 1 or more, or its snes_max_it / ksp_max_it of 0. A value that is no number is left to PETSc, whose message names it.
+    Newton solve's ksp_rtol, snes_rtol or snes_stol of 1 or more, or its snes_max_it / ksp_max_it of 0. A value
+    that is no number is left to PETSc, whose message names it.
     Needs no PETSc (qsc sweep checks its runs' values with it before the first)."""
     kind = re.search(r"_(rtol|atol|stol|divtol|max_it)$", name) if name.startswith(PREFIX) else None
     if kind is None:

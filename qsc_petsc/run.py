@@ -27,9 +27,9 @@ _LIVE_RUNS = []
 # (hunt33_3)
 LARGE_STRAIN = 0.05
 LARGE_ROTATION = 0.1       # rad
-# a step whose displacements stand within this share of round-off is said once (Run._round_off_share): loads that
-# strain the bodies ~1e-12 or less were solved to an absolute floor with no word, the patch pair's two_pass contact
-# force 5e-4 off at a strain of 1e-12 and 30x at 1e-15 (hunt33_3)
+# an answer that stands on round-off to more than this share of its loads is said once (Run._round_off_line): loads
+# that strain the bodies ~1e-12 or less were solved to an absolute floor with no word, the patch pair's two_pass
+# contact force 5e-4 off at a strain of 1e-12 and 30x at 1e-15 (hunt33_3)
 ROUND_OFF_ANSWER = 1e-6
 # ... the Newton test's part of it, only for loads whose own forces are below this share of its floor (a stiff
 # penalty's round-off at a strain near the floor is solver.ROUND_OFF_WARNING's)
@@ -353,13 +353,14 @@ class Run:
 
     def _round_off_line(self, u, ul, t, contact):
         """The warning for an answer at load factor t that stands on round-off, not on the tolerance, else None
-        (hunt33_3, hunt34_2): applied loads (pressures, prescribed displacements) whose own forces are below FLOOR_SHARE of the Newton test's floor (those of a
-        strain of FLOOR_STRAIN), solved to rtol of the floor or to its round-off floor, whose last residual stands
-        above max(ROUND_OFF_ANSWER, 10 rtol) of the loads' own forces (a direct solve's exact step stands at
-        round-off); and contact gaps whose precision eps |x| stands above ROUND_OFF_ANSWER of the loads'
-        displacements: the bodies' largest, the travel of the dies whose rows close, and the pressures' and
-        prescribed displacements' forces as a strain over the model's half-extent (a die that travelled just to
-        touch leaves |u| round-off under loads that are not). contact: the step's report (collective)."""
+        (hunt33_3, hunt34_2): applied loads (pressures, prescribed displacements) whose own forces are below
+        FLOOR_SHARE of the Newton test's floor (those of a strain of FLOOR_STRAIN), solved to rtol of the floor or
+        to its round-off floor, whose last residual stands above max(ROUND_OFF_ANSWER, 10 rtol) of the loads' own
+        forces (a direct solve's exact step stands at round-off); and contact gaps whose precision eps |x| stands
+        above ROUND_OFF_ANSWER of the loads' displacements: the bodies' largest, the travel of the dies whose rows
+        close, and the pressures' and prescribed displacements' forces as a strain over the model's half-extent (a
+        die that travelled just to touch leaves |u| round-off under loads that are not). contact: the step's
+        report (collective)."""
         system, parts, cures = self.system, [], []
         rtol = system.snes.getTolerances()[0]
         own = system.own_force_scale(u)

@@ -632,7 +632,7 @@ SCHEMA = Table({
                      "merged over the defaults.", default=PETSC_DEFAULTS),
     "output": Table({
         "directory": Filled("Output folder; {name} is the scene name; relative to the working directory.",
-                         default="results/{name}"),
+                            default="results/{name}"),
         "xdmf": Bool("Write the solution as solution.xdmf/.h5.", default=True),
     }, "What is written, and where."),
 })

@@ -557,9 +557,10 @@ class ContactModel:
         self.met = set()           # the pairs whose surfaces a search has found within reach (_check_found)
         self.apart = set()         # the pairs last said to have no rows (slip_warnings)
         self.unforced = {}         # per pair: the sides whose nodes its last report found sunk in with no force
-        # per pair: (deepest pressed node, slave's pressed mean, their p / eps_n, |x|, the bodies' largest |u|) [m]
+        # per pair: (deepest pressed node, slave's pressed mean, their p / eps_n, |x|, the bodies' deformation) [m]
         self.pressed_depth = {}
-        self.die_depth = {}        # per die: (deepest node that carries force, its bodies' largest |u|, its farthest node) [m]
+        # per die: (deepest node that carries force, its bodies' deformation, its farthest node from the origin) [m]
+        self.die_depth = {}
         self.through_die = {}      # per die pressing none of its surfaces: its bodies' nodes past its plane (_through_die)
         # per pair (report): the load factor of the search that made its rows, whether the last search kept an
         # earlier search's, the last search's _gap_change, and the searches of the last increment
@@ -1245,8 +1246,7 @@ class ContactModel:
     def _through_die(self, dd, X, U):
         """For a die that presses none of its surfaces: how far the other nodes of its bodies that were not past its
         plane at the start lie past it at the load factor of the report, if more than UNFORCED_WARNING x its
-        element size, with the deepest node's
-        place and surfaces; else None (collective). A sphere's floor given the sphere's top instead of its contact
+        element size, with the deepest node's place and surfaces; else None (collective). A sphere's floor given the sphere's top instead of its contact
         cap let the pole 9.5 mm through it, the die's force 0 and no word (hunt33_6)."""
         mesh = self.mesh
         nodes = np.flatnonzero(np.isin(mesh.vertex_body, dd["bodies"]) & mesh.owned)
@@ -1465,9 +1465,8 @@ def _turned_to_die(mesh, dd, x):
 def _soft_penalty(name, deepest, h, scale, alpha, eps_n, other, precision):
     """The warning line for a pair's or die's penalty rows whose pressed nodes sink deeper than DEEP_PENETRATION x
     their element size or SOFT_PENALTY x their bodies' deformation (scale: the largest displacement from their
-    mean), else None; none
-    within `precision` (m: ROUND_OFF_PENETRATION x eps |x|), where the depths are round-off (a load straining the
-    patch pair 1e-15 read 0.099 of its displacement as a soft penalty)."""
+    mean), else None; none within `precision` (m: ROUND_OFF_PENETRATION x eps |x|), where the depths are round-off
+    (a load straining the patch pair 1e-15 read 0.099 of its displacement as a soft penalty)."""
     if deepest <= precision or not (deepest > DEEP_PENETRATION * h or deepest > SOFT_PENALTY * scale > 0):
         return None
     return (f"{name}: pressed nodes penetrate {other} by up to {deepest:.3g} m = {deepest / h:.2g} element sizes and "
