@@ -494,6 +494,43 @@ def test_a_die_on_surfaces_that_never_reach_it_says_where_the_body_went_through(
         assert all(any(s in w for w in warnings) for s in said), lines
 
 
+def test_a_die_that_lets_nodes_through_within_its_surfaces_footprint_says_so(tmp_path):
+    """A floor die given the outer ring of a block's bottom and not its core: the ring is pressed and the core goes
+    through the floor with no word (hunt34_2: a sphere's floor given its outer skin, the pole 13 mm through, the
+    force 59 % low). Nodes off the die's surfaces, within their footprint, sunk past 10 x its pressed nodes are
+    said; the die on both, or on a patch of a face (a punch of that shape), is not."""
+    from qsc_petsc import fem
+    from qsc_petsc.meshgen import box_mesh
+    box = box_mesh((0.0, 0.0, 0.0), (1.0, 1.0, 0.5), (8, 8, 4), "hex")
+
+    def faces(side):
+        return fem.cell_faces("hex", box.cells[box.surfaces[side][:, 0]], box.surfaces[side][:, 1])
+    bottom, top = faces("zmin"), faces("zmax")
+    core = (np.abs(box.points[bottom].mean(axis=1)[:, :2] - 0.5) < 0.25).all(axis=1)
+    patch = (np.abs(box.points[top].mean(axis=1)[:, :2] - 0.5) < 0.25).all(axis=1)
+    write_gmsh(tmp_path / "b.msh", box.points, box.cells, "hex",
+               {"ring": bottom[~core], "core": bottom[core], "top": top, "patch": top[patch]})
+    text = ('name = "ring"\n[[bodies]]\nname = "b"\nmesh = { type = "file", path = "b.msh" }\nmaterial = { '
+            'youngs_modulus = 1000.0 }\n[[boundary]]\nsurface = "b.top"\ntype = "displacement"\nux = 0.0\n'
+            'uy = 0.0\nuz = -0.01\n[[die]]\nname = "floor"\npoint = [0.0, 0.0, 0.0]\nnormal = [0.0, 0.0, 1.0]\n'
+            'surfaces = {surfaces}\ncondition = "sticking"\n')
+    punch = ('name = "punch"\n[[bodies]]\nname = "b"\nmesh = { type = "file", path = "b.msh" }\nmaterial = { '
+             'youngs_modulus = 1000.0 }\n[[boundary]]\nsurface = "b.ring"\ntype = "displacement"\nux = 0.0\n'
+             'uy = 0.0\nuz = 0.0\n[[boundary]]\nsurface = "b.core"\ntype = "displacement"\nux = 0.0\n'
+             'uy = 0.0\nuz = 0.0\n[[die]]\nname = "punch"\npoint = [0.0, 0.0, 0.5]\nnormal = [0.0, 0.0, -1.0]\n'
+             'motion = [0.0, 0.0, -0.01]\nsurfaces = ["b.patch"]\ncondition = "sticking"\n')
+    for name, scene, said in (("ring", text.replace("{surfaces}", '["b.ring"]'), True),
+                              ("both", text.replace("{surfaces}", '["b.ring", "b.core"]'), False),
+                              ("patch", punch, False)):
+        lines = []
+        run, summary = run_scene(_write(tmp_path, name, scene), tmp_path / name, log=lines.append)
+        run.destroy()
+        warnings = [line for line in lines if "warning" in line]
+        assert summary["status"] == "ok" and len(warnings) == said, lines
+        assert not said or ("die[0] floor: it presses its surfaces (b.ring) while other nodes of its bodies within "
+                            "their footprint lie up to" in warnings[0] and "on b.core" in warnings[0]), lines
+
+
 def test_a_punch_approaching_a_shoulder_is_not_said_to_let_the_body_through(tmp_path):
     """A die on an L-shaped body's shoulder, approaching across a gap: its plane has the body's tall part past it
     from the start, by design, and the through-die warning named those nodes while the die approached, its advice

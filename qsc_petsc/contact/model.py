@@ -141,12 +141,11 @@ def _corner_angles(xf):
     return np.arccos(np.clip(cos, -1.0, 1.0))
 
 
-def symmetry_components(mesh, scene):
-    """(local vertices, 3) bools: the components normal to the symmetry planes that each vertex lies on: the
-    boundaries of type "symmetry", and the displacement boundaries that hold a plane's normal component at 0 and
-    leave the others free, which are the same condition (collective)."""
-    on = np.zeros((len(mesh.coords), 3), dtype=bool)
-    extent = mesh.comm.allreduce(float(np.abs(mesh.coords).max(initial=0.0)), op=MPI.MAX)
+def symmetry_planes(mesh, scene):
+    """(axis, coordinate) of the model's symmetry planes: the boundaries of type "symmetry", and the displacement
+    boundaries that hold a plane's normal component at 0 and leave the others free, which are the same condition
+    (collective)."""
+    planes = []
     for bc in scene.boundary:
         if bc.type == "displacement":
             values = (bc.ux, bc.uy, bc.uz)
@@ -160,7 +159,16 @@ def symmetry_components(mesh, scene):
             continue
         v = mesh.surface_vertices(bc.surface)
         total, count = mesh.comm.allreduce(np.array([mesh.coords[v, axis].sum(), len(v)]), op=MPI.SUM)
-        plane = total / max(count, 1.0)
+        planes.append((axis, total / max(count, 1.0)))
+    return planes
+
+
+def symmetry_components(mesh, scene):
+    """(local vertices, 3) bools: the components normal to the symmetry planes (symmetry_planes) that each vertex
+    lies on (collective)."""
+    on = np.zeros((len(mesh.coords), 3), dtype=bool)
+    extent = mesh.comm.allreduce(float(np.abs(mesh.coords).max(initial=0.0)), op=MPI.MAX)
+    for axis, plane in symmetry_planes(mesh, scene):
         on[:, axis] |= np.abs(mesh.coords[:, axis] - plane) <= 1e-9 * max(extent, 1e-300)
     return on
 
@@ -1224,10 +1232,11 @@ class ContactModel:
             # at 0 N (hunt31_2)
             normal = (term.active & (term.gate_of < 0 if term.gate_of is not None else True)
                       & (term.m.getArray(readonly=True)[term.rows] > 0))
-            if dd["index"] not in self.through_die and not self.comm.allreduce(bool(normal.any()), op=MPI.LOR):
-                through = self._through_die(dd, X, U)
+            if dd["index"] not in self.through_die:
+                presses = self.comm.allreduce(bool(normal.any()), op=MPI.LOR)
+                through = self._through_die(dd, X, U, self.die_depth[dd["index"]][0] if presses else None)
                 if through:
-                    self.through_die[dd["index"]] = through
+                    self.through_die[dd["index"]] = (*through, presses)
             summaries[f"die[{dd['index']}] {spec.name}"] = {
                 "rows": self.comm.allreduce(len(term.rows), op=MPI.SUM),
                 "active_rows": self.comm.allreduce(int(term.active.sum()), op=MPI.SUM),
@@ -1243,17 +1252,29 @@ class ContactModel:
         fields = {"contact_traction": traction, "contact_penetration": penetration, "contact_status": status}
         return fields, summaries
 
-    def _through_die(self, dd, X, U):
-        """For a die that presses none of its surfaces: how far the other nodes of its bodies that were not past its
-        plane at the start lie past it at the load factor of the report, if more than UNFORCED_WARNING x its
-        element size, with the deepest node's place and surfaces; else None (collective). A sphere's floor given the sphere's top instead of its contact
-        cap let the pole 9.5 mm through it, the die's force 0 and no word (hunt33_6)."""
+    def _through_die(self, dd, X, U, pressed=None):
+        """How far nodes of a die's bodies that were not past its plane at the start lie past it at the load factor
+        of the report, with the deepest node's place and surfaces, if more than UNFORCED_WARNING x its element
+        size; else None (collective). A die that presses none of its surfaces counts every other node of its
+        bodies (a sphere's floor given the sphere's top instead of its contact cap let the pole 9.5 mm through, the
+        die's force 0, no word; hunt33_6); one whose deepest pressed node sinks `pressed` counts the nodes off its
+        surfaces, within their footprint on its plane (_footprint), deeper than UNFORCED_RATIO x that (the floor
+        given the sphere's outer skin pressed the ring where it meets the cap, the pole 13 mm through, the force
+        59 % low, no word; hunt34_2). Nodes outside the footprint are left: a die on a patch of a face is a punch
+        of that patch's shape."""
         mesh = self.mesh
         nodes = np.flatnonzero(np.isin(mesh.vertex_body, dd["bodies"]) & mesh.owned)
         # ... of the nodes not past it at the start: a punch that approaches a stepped body's shoulder has the
         # body's tall part past its plane by design (hunt34_2)
         nodes = nodes[_die_depth(dict(dd, nodes=nodes), X, 0.0 * X, 0.0) <= UNFORCED_WARNING * dd["h"]]
         depth = _die_depth(dict(dd, nodes=nodes), X, U, self.t)
+        floor = UNFORCED_WARNING * dd["h"]
+        if pressed is not None:
+            floor = max(floor, UNFORCED_RATIO * pressed)
+            frame, hull = self._footprint(dd)
+            deep = np.flatnonzero((depth > floor) & ~np.isin(nodes, dd["nodes"]))
+            deep = deep[_inside(hull, X[nodes[deep]] @ frame.T, 1e-6 * dd["h"])]
+            nodes, depth = nodes[deep], depth[deep]
         tie = 1e-9 * dd["h"]          # of nodes as deep, the first by x, y, z: the same on any number of ranks
         local = (-np.inf, [], [])
         if len(nodes):
@@ -1262,11 +1283,33 @@ class ContactModel:
             bodies = {self.scene.bodies[b].name for b in dd["bodies"]}
             named = [name for name in mesh.surface_names if name.split(".", 1)[0] in bodies
                      and np.isin(nodes[k], mesh.surface_vertices(name))]
+            # a mesh file's "boundary" (every boundary face) beside the groups that name the place says nothing
+            named = [name for name in named if not name.endswith(".boundary")] or named
             local = (float(depth[k]), X[nodes[k]].tolist(), named)
         entries = self.comm.allgather(local)
         top = max(entry[0] for entry in entries)
         deepest, where, named = min((entry for entry in entries if entry[0] >= top - tie), key=lambda entry: entry[1])
-        return (deepest, where, named) if deepest > UNFORCED_WARNING * dd["h"] else None
+        return (deepest, where, named) if deepest > floor else None
+
+    def _footprint(self, dd):
+        """A frame (2, 3) of the die's plane and the convex hull (k, 2), counter-clockwise, of its surfaces' nodes
+        projected on it in that frame (none: fewer than 3 corners), made once (collective)."""
+        if "hull" not in dd:
+            n = np.asarray(dd["spec"].normal, dtype=float)
+            t1 = np.cross(n, np.eye(3)[int(np.argmin(np.abs(n)))])
+            t1 /= np.linalg.norm(t1)
+            frame = np.array([t1, np.cross(n, t1)])
+            x = self.mesh.coords[dd["nodes"][self.mesh.owned[dd["nodes"]]]]
+            # with the surfaces' mirror images in the symmetry planes: a quarter sphere's outer skin, a quarter ring
+            # whose hull left its pole out
+            for axis, plane in symmetry_planes(self.mesh, self.scene):
+                image = x.copy()
+                image[:, axis] = 2.0 * plane - image[:, axis]
+                x = np.vstack([x, image])
+            # each rank's hull, then the hull of their corners
+            corners = self.comm.allgather(_convex_hull(x @ frame.T))
+            dd["frame"], dd["hull"] = frame, _convex_hull(np.vstack(corners))
+        return dd["frame"], dd["hull"]
 
     def _pressed_areas(self, S, X, U, found, F):
         """The areas and normals of S's owned nodes on the faces turned towards the other surface (facing_areas):
@@ -1414,12 +1457,13 @@ class ContactModel:
             through = self.through_die.get(dd["index"])
             if through and (name, "through") not in self.slip_warned:
                 self.slip_warned.add((name, "through"))
-                deepest, where, named = through
+                deepest, where, named, presses = through
                 listed = ", ".join(s for s, _ in dd["surfaces"])
-                lines.append(f"{name} {spec.name}: it presses none of its surfaces ({listed}) while other nodes of its "
-                             f"bodies lie up to {deepest:.3g} m = {deepest / dd['h']:.2g} of its surfaces' element size "
-                             f"past its plane (the deepest at x, y, z = {', '.join(f'{v:.4g}' for v in where)} "
-                             f"before the load"
+                what = f"it presses its surfaces ({listed})" if presses else f"it presses none of its surfaces ({listed})"
+                lines.append(f"{name} {spec.name}: {what} while other nodes of its bodies"
+                             + (" within their footprint" if presses else "") + f" lie up to {deepest:.3g} m = "
+                             f"{deepest / dd['h']:.2g} of its surfaces' element size past its plane (the deepest at "
+                             f"x, y, z = {', '.join(f'{v:.4g}' for v in where)} before the load"
                              + (f", on {', '.join(named)}" if named else "") + "): a die acts on the surfaces it lists "
                              "only, and the others go through it; list the surface that faces it")
             deepest, scale, far = self.die_depth.get(dd["index"], (0.0,) * 3)
@@ -1460,6 +1504,35 @@ def _turned_to_die(mesh, dd, x):
     """Which of a die's nodes (dd["nodes"]) have a surface turned towards the die at positions x (search.FACING, the
     die's normal as the other surface's): the nodes a die's rows may hold."""
     return facing_pairs(nodal_normals(mesh, dd["surface"], x, by="angle"), np.asarray(dd["spec"].normal, dtype=float))
+
+
+def _convex_hull(points):
+    """The convex hull of 2-D points (n, 2), counter-clockwise from the lowest-leftmost (Andrew's monotone chain),
+    none (0, 2) for fewer than 3 corners."""
+    p = np.unique(np.asarray(points, dtype=float).reshape(-1, 2), axis=0)
+
+    def chain(seq):
+        out = []
+        for q in seq:
+            while len(out) >= 2 and ((out[-1][0] - out[-2][0]) * (q[1] - out[-2][1])
+                                     - (out[-1][1] - out[-2][1]) * (q[0] - out[-2][0])) <= 0:
+                out.pop()
+            out.append(q)
+        return out
+    if len(p) < 3:
+        return np.zeros((0, 2))
+    hull = chain(p)[:-1] + chain(p[::-1])[:-1]
+    return np.array(hull) if len(hull) >= 3 else np.zeros((0, 2))
+
+
+def _inside(hull, points, tol):
+    """Which 2-D points (m, 2) lie inside a counter-clockwise convex hull (k, 2), or within tol of it."""
+    if len(hull) < 3 or not len(points):
+        return np.zeros(len(points), dtype=bool)
+    edges = np.roll(hull, -1, axis=0) - hull
+    rel = points[:, None, :] - hull[None, :, :]
+    cross = (edges[None, :, 0] * rel[:, :, 1] - edges[None, :, 1] * rel[:, :, 0]) / np.linalg.norm(edges, axis=1)
+    return (cross >= -tol).all(axis=1)
 
 
 def _soft_penalty(name, deepest, h, scale, alpha, eps_n, other, precision):
