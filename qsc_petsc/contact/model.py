@@ -1271,8 +1271,10 @@ class ContactModel:
         floor = UNFORCED_WARNING * dd["h"]
         if pressed is not None:
             floor = max(floor, UNFORCED_RATIO * pressed)
-            frame, hull = self._footprint(dd)
             deep = np.flatnonzero((depth > floor) & ~np.isin(nodes, dd["nodes"]))
+            if not self.comm.allreduce(len(deep) > 0, op=MPI.LOR):
+                return None           # the footprint (a hull) only when some node off the surfaces sank that deep
+            frame, hull = self._footprint(dd)
             deep = deep[_inside(hull, X[nodes[deep]] @ frame.T, 1e-6 * dd["h"])]
             nodes, depth = nodes[deep], depth[deep]
         tie = 1e-9 * dd["h"]          # of nodes as deep, the first by x, y, z: the same on any number of ranks
