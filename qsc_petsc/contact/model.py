@@ -1108,9 +1108,10 @@ class ContactModel:
         # penetration is read against (slip_warnings). Its largest displacement hid a penalty 18 % soft under a
         # stack slid 0.3 m, and dies 45 % soft that carried a stack 0.5 m (hunt34_2)
         nb = len(self.scene.bodies)
-        owned = mesh.owned
-        sums = np.zeros((nb, 4))
-        np.add.at(sums, mesh.vertex_body[owned], np.hstack([U[owned], np.ones((int(owned.sum()), 1))]))
+        mine = mesh.owned & (mesh.vertex_body >= 0)
+        body, owned = mesh.vertex_body[mine], U[mine]
+        sums = np.stack([np.bincount(body, weights=owned[:, c], minlength=nb) for c in range(3)]
+                        + [np.bincount(body, minlength=nb).astype(float)], axis=1)
         self.comm.Allreduce(MPI.IN_PLACE, sums, op=MPI.SUM)
         mean = sums[:, :3] / np.maximum(sums[:, 3:], 1.0)
         moved = np.array([float(np.linalg.norm(U[mesh.vertex_body == b] - mean[b], axis=1).max(initial=0.0))
