@@ -210,6 +210,20 @@ def on_all(comm, fn):
     return result
 
 
+def first_largest(comm, values, points, tie=0.0, relative=0.0, detail=None):
+    """The largest of values (k,) over all ranks, the point (points (k, 3)) it lies at, and detail(i) of it (None
+    without detail): of the values within max(tie, relative x |largest|) of the largest, the one first by x, y, z,
+    so that it is the same on any number of ranks; (-inf, None, None) when no rank holds any (collective)."""
+    top = comm.allreduce(float(np.max(values, initial=-np.inf)), op=MPI.MAX)
+    local = None
+    level = np.flatnonzero(values >= top - max(tie, relative * abs(top))) if np.isfinite(top) else []
+    if len(level):
+        k = level[np.lexsort(points[level].T[::-1])[0]]
+        local = (float(values[k]), np.asarray(points[k], dtype=float).tolist(), detail(k) if detail else None)
+    entries = [entry for entry in comm.allgather(local) if entry is not None]
+    return min(entries, key=lambda entry: entry[1]) if entries else (-np.inf, None, None)
+
+
 # The least memory a run takes, measured (docs/performance.md, elasticity: 985k dofs in 2205 MiB on one rank):
 # about 2 KiB per dof, and 150 MiB per process for Python, PETSc and MPI. A scene below it cannot fit.
 MEMORY_PER_DOF, MEMORY_PER_RANK = 2048, 150 * 2**20

@@ -14,7 +14,7 @@ from petsc4py import PETSc
 
 from . import __version__, assembly, elasticity, lattice, options, preconditioner
 from .errors import OutputError, QscError, SceneError, folder_error
-from .mesh import check_cells, distribute_mesh, on_root
+from .mesh import check_cells, distribute_mesh, first_largest, on_root
 from .output import ResultWriter, check_output_folder, clear_results, write_json, write_on_root
 from .restraint import Restraint, describe
 from .scene import PETSC_DEFAULTS
@@ -321,9 +321,8 @@ class Run:
     def _largest_strain(self, stress, rotation):
         """The largest strain component over the cells (normal strains and half the engineering shears, from the
         cells' stresses through the compliance of their materials) and where (a cell's centroid), then the largest
-        of each cell's rotation (rotation: as fields fills it) and where: the same on every rank. A cantilever turned 0.42 rad, whose linear
-        answer stretched it 5.2 %, had strains of 0.0044 (hunt33_6)."""
-        mesh = self.mesh
+        of each cell's rotation (rotation: as fields fills it) and where: the same on every rank. A cantilever turned
+        0.42 rad, whose linear answer stretched it 5.2 %, had strains of 0.0044 (hunt33_6)."""
         lm, mu = self.lmbda[:, None], self.mu[:, None]
         normal = stress[:, :3] / (2 * mu) - lm * stress[:, :3].sum(axis=1, keepdims=True) / (2 * mu * (3 * lm + 2 * mu))
         size = np.abs(np.hstack([normal, stress[:, 3:] / (2 * mu)])).max(axis=1, initial=0.0)
@@ -331,16 +330,14 @@ class Run:
         def largest(values):
             # of cells as large (to 1e-9), the first by x, y, z of its centre: a uniform strain named a different
             # cell on 1 and 2 ranks (hunt34_2)
-            local = (0.0, [0.0] * 3)
-            if len(values):
-                level = np.flatnonzero(values >= values.max() * (1 - 1e-9))
-                centres = mesh.coords[mesh.cells[level]].mean(axis=1)
-                c = int(np.lexsort(centres.T[::-1])[0])
-                local = (float(values[level[c]]), centres[c].tolist())
-            entries = self.comm.allgather(local)
-            top = max(entry[0] for entry in entries)
-            return min((entry for entry in entries if entry[0] >= top * (1 - 1e-9)), key=lambda entry: entry[1])
+            value, where, _ = first_largest(self.comm, values, self._centres, relative=1e-9)
+            return (value, where) if where is not None else (0.0, [0.0] * 3)
         return (*largest(size), *largest(rotation))
+
+    @cached_property
+    def _centres(self):
+        """The local cells' centroids (the mean of their nodes) [m], where _largest_strain places its cells."""
+        return self.mesh.coords[self.mesh.cells].mean(axis=1)
 
     @cached_property
     def _reach(self):

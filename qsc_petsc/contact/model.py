@@ -17,7 +17,7 @@ from petsc4py import PETSc
 
 from .. import assembly, fem
 from ..errors import SceneError
-from ..mesh import on_all
+from ..mesh import first_largest, on_all
 from ..solver import DIE_AWAY, FLOOR_STRAIN, ConstraintTerm, array_digest
 from . import quadrature
 from . import rows as row_builders
@@ -1264,10 +1264,12 @@ class ContactModel:
         59 % low, no word; hunt34_2). Nodes outside the footprint are left: a die on a patch of a face is a punch
         of that patch's shape."""
         mesh = self.mesh
-        nodes = np.flatnonzero(np.isin(mesh.vertex_body, dd["bodies"]) & mesh.owned)
-        # ... of the nodes not past it at the start: a punch that approaches a stepped body's shoulder has the
-        # body's tall part past its plane by design (hunt34_2)
-        nodes = nodes[_die_depth(dict(dd, nodes=nodes), X, 0.0 * X, 0.0) <= UNFORCED_WARNING * dd["h"]]
+        if "before" not in dd:
+            nodes = np.flatnonzero(np.isin(mesh.vertex_body, dd["bodies"]) & mesh.owned)
+            # ... of the nodes not past it at the start: a punch that approaches a stepped body's shoulder has the
+            # body's tall part past its plane by design (hunt34_2)
+            dd["before"] = nodes[_die_depth(dict(dd, nodes=nodes), X, 0.0 * X, 0.0) <= UNFORCED_WARNING * dd["h"]]
+        nodes = dd["before"]
         depth = _die_depth(dict(dd, nodes=nodes), X, U, self.t)
         floor = UNFORCED_WARNING * dd["h"]
         if pressed is not None:
@@ -1278,20 +1280,15 @@ class ContactModel:
             frame, hull = self._footprint(dd)
             deep = deep[_inside(hull, X[nodes[deep]] @ frame.T, 1e-6 * dd["h"])]
             nodes, depth = nodes[deep], depth[deep]
-        tie = 1e-9 * dd["h"]          # of nodes as deep, the first by x, y, z: the same on any number of ranks
-        local = (-np.inf, [], [])
-        if len(nodes):
-            level = np.flatnonzero(depth >= depth.max() - tie)
-            k = level[np.lexsort(X[nodes[level]].T[::-1])[0]]
-            bodies = {self.scene.bodies[b].name for b in dd["bodies"]}
+        bodies = {self.scene.bodies[b].name for b in dd["bodies"]}
+
+        def surfaces(k):
             named = [name for name in mesh.surface_names if name.split(".", 1)[0] in bodies
                      and np.isin(nodes[k], mesh.surface_vertices(name))]
             # a mesh file's "boundary" (every boundary face) beside the groups that name the place says nothing
-            named = [name for name in named if not name.endswith(".boundary")] or named
-            local = (float(depth[k]), X[nodes[k]].tolist(), named)
-        entries = self.comm.allgather(local)
-        top = max(entry[0] for entry in entries)
-        deepest, where, named = min((entry for entry in entries if entry[0] >= top - tie), key=lambda entry: entry[1])
+            return [name for name in named if not name.endswith(".boundary")] or named
+        # of nodes as deep, the first by x, y, z: the same on any number of ranks
+        deepest, where, named = first_largest(self.comm, depth, X[nodes], tie=1e-9 * dd["h"], detail=surfaces)
         return (deepest, where, named) if deepest > floor else None
 
     def _footprint(self, dd):
