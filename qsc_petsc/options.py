@@ -255,7 +255,7 @@ def check_options():
             # (hunt32_3)
             if name == "log_view":
                 PETSc.Options().delValue(name)
-            raise SceneError(f"PETSc options: {_OPTION_ERRORS[65]} in -{name} ({path!r}: {why})")
+            raise SceneError(f"PETSc options: {OPTION_ERRORS[65]} in -{name} ({path!r}: {why})")
 
 
 def _viewer_file(value):
@@ -269,7 +269,7 @@ def _viewer_file(value):
 # PETSc error codes that setFromOptions raises for a bad option: wrong argument, out of range (a value
 # that does not parse), a value that is none of the option's choices, unknown type (a misspelt or
 # missing solver package)
-_OPTION_ERRORS = {56: "a value the option does not support (a viewer option such as -qsc_ksp_monitor takes no "
+OPTION_ERRORS = {56: "a value the option does not support (a viewer option such as -qsc_ksp_monitor takes no "
                       "value, or ascii:FILE)", 62: "a wrong argument", 63: "a value out of range or not a number",
                   65: "a file that cannot be opened", 83: "a value that is none of the option's choices",
                   86: "an unknown type", 92: "a factorization that no installed package provides for this matrix "
@@ -285,7 +285,7 @@ def set_from_options(obj, what):
     try:
         obj.setFromOptions()
     except PETSc.Error as exc:
-        if exc.ierr not in _OPTION_ERRORS:
+        if exc.ierr not in OPTION_ERRORS:
             raise
         raise SceneError(f"PETSc options of the {what}: {refused_option(exc)}") from None
 
@@ -295,7 +295,7 @@ def refused_option(exc):
     from .errors import petsc_detail
 
     detail = petsc_detail(exc)
-    return f"{_OPTION_ERRORS[exc.ierr]}{_holders(detail)} (PETSc error {exc.ierr} in {detail})"
+    return f"{OPTION_ERRORS[exc.ierr]}{_holders(detail)} (PETSc error {exc.ierr} in {detail})"
 
 
 def _holders(detail):

@@ -18,7 +18,14 @@ from .mesh import check_cells, distribute_mesh, first_largest, on_root
 from .output import ResultWriter, check_output_folder, clear_results, write_json, write_on_root
 from .restraint import Restraint, describe
 from .scene import PETSC_DEFAULTS
-from .solver import AUGMENTED_ROUND_OFF, FLOOR_STRAIN, ROUND_OFF_WARNING, System, solve_load_step
+from .solver import (
+    AUGMENTED_ROUND_OFF,
+    FLOOR_STRAIN,
+    ROUND_OFF_WARNING,
+    System,
+    check_solver_options,
+    solve_load_step,
+)
 
 # Runs built and not yet destroyed, as weak references in creation order (the same order on every rank).
 _LIVE_RUNS = []
@@ -183,6 +190,9 @@ class Run:
     def _build(self, scene, comm):
         """Mesh, contact model and its first search, operators, solver and output writer, in that order."""
         options.check_options()
+        # the solver set up on a model matrix, as `qsc check` does: an option a factorization package refuses
+        # (-qsc_mat_mumps_icntl_7 99) is an input error before the folder is touched, not a failed solve
+        check_solver_options(comm, scene.solver.contact_preconditioner if scene.contact else None)
         with self.phases("mesh"):
             self.mesh = distribute_mesh(scene, comm)
             check_cells(self.mesh, scene)

@@ -363,13 +363,19 @@ def _model_matrix(comm):
     return A
 
 
-def check_solver_options(comm, contact_preconditioner=None):
-    """What the run's solver set-up would say of the options database (collective): `qsc check`. The
-    preconditioner is also set up, on a small model matrix (_model_matrix), as the run would set it up:
-    with contact_preconditioner (a scene's solver.contact_preconditioner, given when it has contact pairs)
-    the band composite where the run would use it, so that a factorization package (-qsc_pc_factor_*,
-    -qsc_band_pc_factor_*) and the contact band's own options (-qsc_band_*) are met before the run. A
-    set-up that fails there for another reason is left to the run (a model matrix is not the run's)."""
+class _ErrorText:
+    """A PETSc error as one rank saw it (its code and text), for petsc_detail on every rank."""
+
+    def __init__(self, ierr, text):
+        self.ierr, self.text = ierr, text
+
+    def __str__(self):
+        return self.text
+
+
+def _set_up_model(comm, contact_preconditioner):
+    """The run's solver set up on the model matrix (check_solver_options): the PETSc.Error its set-up raised,
+    or None. A refused option of the solver objects' own is a SceneError already (configure_snes)."""
     snes = new_snes(comm, 50)
     A = None
     try:
@@ -382,12 +388,59 @@ def check_solver_options(comm, contact_preconditioner=None):
         try:
             ksp.setUp()
         except PETSc.Error as exc:
-            if exc.ierr == PETSC_ERR_MISSING_FACTOR:
-                raise missing_factor_error(exc) from None
+            return exc
+        return None
     finally:
         snes.destroy()
         if A is not None:
             A.destroy()
+
+
+def _options_at_fault(comm, contact_preconditioner):
+    """The -qsc_ options without which the model's set-up passes, one left out at a time (collective: every
+    rank holds the same database), as "-name value". A factorization package reads its options (-qsc_mat_mumps_icntl_7 99) only
+    when it factors, and its message names neither the option nor always the value."""
+    database = PETSc.Options()
+    at_fault = []
+    for name, value in options.options_in_effect().items():
+        if not name.startswith(options.PREFIX):
+            continue
+        database.delValue(name)
+        try:
+            passes = _set_up_model(comm, contact_preconditioner) is None
+        except SceneError:
+            passes = False
+        finally:
+            database.setValue(name, value)
+        if passes:
+            at_fault.append((name.endswith("_type"), f"-{name}" + (f" {value}" if value else "")))
+    # a type option passes by choosing an object that reads no such option (-qsc_pc_type lu): named only alone
+    return [named for chooses, named in at_fault if not chooses] or [named for _, named in at_fault]
+
+
+def check_solver_options(comm, contact_preconditioner=None):
+    """What the run's solver set-up would say of the options database (collective): `qsc check`'s, and the run's
+    before it touches its folder. The preconditioner is also set up, on a small model matrix (_model_matrix), as
+    the run would set it up: with contact_preconditioner (a scene's solver.contact_preconditioner, given when it
+    has contact pairs) the band composite where the run would use it, so that a factorization package
+    (-qsc_pc_factor_*, -qsc_band_pc_factor_*), the options it reads when it factors (-qsc_mat_mumps_*,
+    -qsc_band_mat_mumps_*) and the contact band's own options (-qsc_band_*) are met before the run: the run
+    failed on them at its first factorization, exit 3, "solve failed" (hunt34_3). A set-up that fails there
+    for another reason is left to the run (a model matrix is not the run's)."""
+    exc = _set_up_model(comm, contact_preconditioner)
+    # the first rank's error that met one (an option's is every rank's: they hold the same database)
+    errors = comm.allgather(None if exc is None else (exc.ierr, str(exc)))
+    ierr, text = next((e for e in errors if e is not None), (0, ""))
+    exc = _ErrorText(ierr, text)      # a PETSc.Error's text is its own rank's PETSc traceback
+    if ierr == PETSC_ERR_MISSING_FACTOR:
+        raise missing_factor_error(exc)
+    if ierr not in options.OPTION_ERRORS:
+        return
+    at_fault = _options_at_fault(comm, contact_preconditioner)
+    if not at_fault:
+        raise SceneError(f"PETSc options: {options.refused_option(exc)}")
+    raise SceneError(f"PETSc options: the solver's set-up refuses {', '.join(at_fault)} (PETSc error {ierr} in "
+                     f"{petsc_detail(exc)})")
 
 
 class System:

@@ -766,22 +766,25 @@ def test_a_viewer_option_with_a_bad_value_is_an_input_error(tmp_path, option, ho
 
 @pytest.mark.parametrize("case", ["rtol 1", "atol above", "minres", "no cholesky", "value-less", "viewer file",
                                   "preonly jacobi", "no tolerance", "log_view file",
-                                  "no newton step", "snes rtol 10", "snes stol 1", "equals"])
+                                  "no newton step", "snes rtol 10", "snes stol 1", "equals", "mumps ordering"])
 def test_solver_options_that_cannot_work_end_cleanly(tmp_path, case):
     """Options a PETSc user may try, each of which ended in a wrong answer with exit 0 or a traceback with exit 1
     (hunt30_6): -qsc_ksp_rtol 1 stops every linear solve before its first iteration, and the zero Newton steps
     passed the step test (the two cubes never moved, exit 0): exit 2 naming it; a -qsc_ksp_atol above the residual
     likewise (reactions 9 % off): exit 3 saying why; minres, which cannot take the unpreconditioned norm, failed
-    again writing petsc_options.txt (exit 1): exit 3 with the file written; a Cholesky no package provides, met
+    again writing petsc_options.txt (exit 1): it is refused with the file written; a Cholesky no package provides, met
     at set-up (exit 1, no summary): exit 2; a refused value beside a value-less option crashed naming it (exit
     1); an ASCII viewer's file that cannot be written, which rank 0 alone opens, left the others waiting: exit 2
     before the run; preonly with an inexact preconditioner failed naming a body held by no boundary (its wrong
-    iterates opened the holding rows): exit 3 naming the one application instead."""
+    iterates opened the holding rows): exit 3 naming the one application instead. Options the solver's set-up
+    refuses (minres, a MUMPS option read when it factors) are met on a model matrix before the run: exit 2 naming
+    them (they failed the first solve, exit 3, hunt34_3)."""
     options, code, said = {
         "rtol 1": (["-qsc_ksp_rtol", "1"], 2, "-qsc_ksp_rtol: must be below 1"),
         "atol above": (["-qsc_ksp_type", "cg", "-qsc_ksp_atol", "1"], 3,
                        "a linear solve stopped with its residual far above the Newton target"),
-        "minres": (["-qsc_ksp_type", "minres"], 3, "KSP minres does not support norm type"),
+        "minres": (["-qsc_ksp_type", "minres"], 2, ("the solver's set-up refuses -qsc_ksp_type minres (PETSc error "
+                   "56 in KSPSetUpNorms_Private(): KSP minres does not support norm type")),
         "no cholesky": (["-qsc_pc_type", "cholesky", "-qsc_pc_factor_mat_solver_type", "superlu"], 2,
                         "a factorization that no installed package provides"),
         "value-less": (["-qsc_snes_monitor", "-qsc_ksp_monitor", "true"], 2,
@@ -802,6 +805,11 @@ def test_solver_options_that_cannot_work_end_cleanly(tmp_path, case):
         "snes stol 1": (["-qsc_snes_stol", "1"], 2, "-qsc_snes_stol: must be below 1"),
         # PETSc reads it as an option "qsc_pc_type=lu" with no value: the defaults ran, exit 0 (hunt34_3)
         "equals": (["-qsc_pc_type=lu"], 2, "-qsc_pc_type=lu: PETSc options take their value after a space"),
+        # read by MUMPS when it factors: "solve failed ... PETSc error 63", exit 3, naming no option (hunt34_3)
+        "mumps ordering": (["-qsc_ksp_type", "preonly", "-qsc_pc_type", "lu", "-qsc_pc_factor_mat_solver_type",
+                            "mumps", "-qsc_mat_mumps_icntl_7", "99"], 2,
+                           ("the solver's set-up refuses -qsc_mat_mumps_icntl_7 99 (PETSc error 63 in "
+                           "MatSetFromOptions_MUMPS(): Valid values are")),
     }[case]
     proc = subprocess.run([sys.executable, "-m", "qsc_petsc.cli", "run", str(CONFIGS / "block_compression.toml"),
                            "--out", str(tmp_path), *options], capture_output=True, text=True, timeout=120,
@@ -832,6 +840,11 @@ BAND_OPTIONS = {
     "no package": (["-qsc_band_pc_factor_mat_solver_type", "superlu"],
                    "qsc: error: the PETSc options ask for a factorization that no installed package provides",
                    "in MatGetFactor(): MatSolverType superlu does not support"),
+    # read when MUMPS factors: the run failed its first solve, exit 3, naming no option (hunt34_3)
+    "refused at the factorization": (["-qsc_band_mat_mumps_icntl_4", "abc"],
+                                     ("qsc: error: PETSc options: the solver's set-up refuses "
+                                     "-qsc_band_mat_mumps_icntl_4 abc (PETSc error 63"),
+                                     "in PetscOptionsStringToInt(): Input string abc has no integer value"),
 }
 
 
@@ -842,7 +855,7 @@ def test_bad_band_option_ends_every_rank_with_exit_2(tmp_path, case):
     at the search (read inside the solve's callbacks it crashed the other rank), a factorization no package
     provides is met at the first factorization (its half-built preconditioner crashed PETSc's finalization
     until the failed run was destroyed before exit). `qsc check` says the same: it sets the preconditioner up on
-    a model matrix (it passed them, hunt32_3)."""
+    a model matrix (it passed them, hunt32_3), and so does the run before it touches its folder."""
     serial_only()
     option, expected, quoted = BAND_OPTIONS[case]
     for command in (["run", CONFIGS / "two_cubes_dies.toml", "--out", tmp_path / "out"],
