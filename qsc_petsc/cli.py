@@ -91,6 +91,17 @@ def _end_interrupted(line="qsc: interrupted"):
     os._exit(130)
 
 
+def _say(*args):
+    """print on rank 0, each line as it comes (a pipe or a file sees the run's progress); once stdout's reader
+    has gone, the rest goes to /dev/null and the run goes on: its results are its files."""
+    try:
+        print(*args, flush=True)
+    except BrokenPipeError:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+
+
 def main(argv=None):
     argv = sys.argv[1:] if argv is None else argv
     if argv[:1] == ["sweep"]:          # runs are subprocesses: the sweep itself never starts PETSc or MPI
@@ -108,7 +119,10 @@ def main(argv=None):
     # before, it ends the process at once (mpirun then ends the others); a handler there raised in one rank while
     # the others waited for it in a collective call, and its exit's clean-up waited too, for ever
     signal.signal(signal.SIGTERM, _interrupt)
-    say = print if comm.rank == 0 else (lambda *a, **k: None)
+    # a reader that leaves (`qsc run ... | head`): PETSc's handler aborted the run at the next line (exit 59, the
+    # summary left "running"; hunt34_3). Ignored, a write fails instead, and _say sends the rest nowhere
+    signal.signal(signal.SIGPIPE, signal.SIG_IGN)
+    say = _say if comm.rank == 0 else (lambda *a, **k: None)
     if args.version:
         say(versions())
         return 0

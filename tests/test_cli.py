@@ -957,3 +957,23 @@ def test_a_signal_to_one_rank_ends_the_job(tmp_path, which):
     assert f"qsc: interrupted (rank {which}); ending the job" in text and "Traceback" not in text, text
     done = json.loads(summary.read_text())
     assert done["steps"] and done["status"] == ("interrupted" if which == 0 else "running")
+
+
+def test_a_reader_that_leaves_does_not_end_the_run(tmp_path):
+    """`qsc run ... | head -1`: PETSc's signal handler ended the run at its next line (SIGPIPE, exit 59, the
+    summary left "running" after 1 step of 30; hunt34_3). The rest of the lines go nowhere and the run ends as
+    it would have; its lines come as they are made (the first is read while it runs)."""
+    out = tmp_path / "out"
+    proc = subprocess.Popen([sys.executable, "-m", "qsc_petsc.cli", "run", str(CONFIGS / "patch_test.toml"),
+                             "--out", str(out), "--set", "load.steps=30"], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    try:
+        first = proc.stdout.readline()
+        proc.stdout.close()
+        _, err = proc.communicate(timeout=120)
+    finally:
+        proc.kill()
+    assert first.startswith("qsc: patch_test: 801 dofs on 1 rank(s)"), first
+    assert proc.returncode == 0 and "Traceback" not in err and "PETSC ERROR" not in err, err
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["status"] == "ok" and len(summary["steps"]) == 30
