@@ -43,22 +43,41 @@ def check_output_folder(directory):
         raise OutputError(f"output: cannot write in {str(directory)!r}: permission denied")
 
 
+ASIDE = ".cleared"         # an earlier result renamed aside, before all of them go (clear_results)
+
+
 def clear_results(directory):
     """An earlier run's results in `directory` removed (rank 0, at a run's start): a run stopped in its set-up or
     first step, or one without XDMF output, left them beside its own, another scene's fields under this run's
-    name. Only the names a run writes go (RESULTS, the step files, temporary files of an atomic write)."""
+    name. Only the names a run writes go (RESULTS, the step files, temporary files of an atomic write, and files
+    a clearing cut short left aside). All or none: each is renamed aside before any goes."""
     steps = directory / "steps"
+    names = dict(RESULTS)
     stale = [directory / name for name, folder in RESULTS if not folder]
-    stale += [p for p in directory.glob("*.tmp") if p.name[:-4] in dict(RESULTS)]
+    stale += [p for suffix in (".tmp", ASIDE) for p in directory.glob("*" + suffix)
+              if p.name[:-len(suffix)] in names]
     if steps.is_dir():
-        stale += list(steps.glob("step_*.xdmf")) + list(steps.glob("step_*.xdmf.tmp"))
+        stale += [p for pattern in ("step_*.xdmf", "step_*.xdmf.tmp", "step_*.xdmf" + ASIDE) for p in steps.glob(pattern)]
     stale = [path for path in stale if path.is_file()]
     # all or nothing: a steps/ folder this process may not change lost the earlier run's other results first, and
     # the run then stopped with no summary (hunt33_2)
     for path in stale:
         if not os.access(path.parent, os.W_OK | os.X_OK):
             raise PermissionError(errno.EACCES, os.strerror(errno.EACCES), str(path))
-    for path in stale:
+    # a file that cannot go though its folder may be written (immutable, or another user's in a sticky folder)
+    # did the same (hunt34_3): each is renamed aside first, and back if one cannot be
+    aside = []
+    try:
+        for path in stale:
+            if not path.name.endswith(ASIDE):
+                path = path.rename(path.with_name(path.name + ASIDE))
+            aside.append(path)
+    except OSError:
+        for path in reversed(aside):
+            if path not in stale:
+                path.rename(path.with_name(path.name[:-len(ASIDE)]))
+        raise
+    for path in aside:
         path.unlink()
 
 

@@ -405,6 +405,37 @@ def test_a_folder_it_cannot_clear_keeps_the_earlier_results(tmp_path, monkeypatc
     assert sorted(p.relative_to(out).as_posix() for p in out.rglob("*") if p.is_file()) == before
 
 
+def test_a_file_it_cannot_remove_keeps_the_earlier_results(tmp_path, monkeypatch):
+    """A file that cannot go though its folder may be written (immutable, another user's in a sticky folder):
+    summary.json had gone first, then the run stopped naming the file (hunt34_3). Each is renamed aside first and
+    back if one cannot be; a clearing cut short leaves files aside that the next run removes."""
+    from qsc_petsc import output
+    from qsc_petsc.errors import OutputError
+    out = tmp_path / "out"
+    run, _ = run_scene(CONFIGS / "two_cubes_dies.toml", out)
+    run.destroy()
+    before = sorted(p.relative_to(out).as_posix() for p in out.rglob("*") if p.is_file())
+    real = Path.rename
+
+    def rename(self, target):
+        if self.name == "solution.h5":
+            raise PermissionError(1, "Operation not permitted", str(self))
+        return real(self, target)
+
+    monkeypatch.setattr(output.Path, "rename", rename)
+    with pytest.raises(OutputError, match=r"cannot remove the earlier run's '.*solution.h5': Operation not permitted"):
+        run_scene(CONFIGS / "patch_test.toml", out)
+    assert sorted(p.relative_to(out).as_posix() for p in out.rglob("*") if p.is_file()) == before
+    monkeypatch.undo()
+    (out / "summary.json").rename(out / ("summary.json" + output.ASIDE))    # a clearing cut short
+    (out / "steps" / "step_0001.xdmf").rename(out / "steps" / ("step_0001.xdmf" + output.ASIDE))
+    (out / "notes.json.cleared").write_text("the user's")
+    run, _ = run_scene(CONFIGS / "patch_test.toml", out, ["output.xdmf=false"])
+    run.destroy()
+    left = sorted(p.relative_to(out).as_posix() for p in out.rglob("*") if p.is_file())
+    assert left == ["notes.json.cleared", "petsc_options.txt", "scene.resolved.toml", "summary.json"]
+
+
 # ---------------------------------------------------------------- rank independence
 
 def test_two_ranks_write_the_same_results(serial, parallel):
