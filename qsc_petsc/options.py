@@ -303,7 +303,8 @@ def _holders(detail):
     unsupported viewer or a file it cannot open: it names the value, not the option), or a type option given no
     value; '' if none is found."""
     quoted = (re.search(r"Input string (\S+) has no (?:numeric|integer) value", detail)
-              or re.search(r"Unsupported viewer (\S+)", detail) or re.search(r"file: (\S+)", detail))
+              or re.search(r"Unsupported viewer (\S+)", detail) or re.search(r"file: (\S+)", detail)
+              or re.search(r"Unknown viewer format (\S+)", detail))
     names = [f"-{name}" for name, value in options_in_effect().items()
              if quoted and value and (value == quoted.group(1) or value.endswith(":" + quoted.group(1)))]
     if "Unable to find requested" in detail:        # a type option given no value: PETSc quotes an empty name

@@ -10,6 +10,7 @@ later keeps what it had written.
 import errno
 import json
 import os
+import re
 import textwrap
 from pathlib import Path
 
@@ -81,6 +82,16 @@ def clear_results(directory):
         path.unlink()
 
 
+def os_reason(exc):
+    """An OSError's reason in one line: HDF5's holds its own account over two lines, a time stamp and the
+    descriptors (a full disk at solution.h5, hunt34_3), of which the system's message is what says why."""
+    text = exc.strerror or str(exc)
+    said = re.search(r"error message = '([^']*)'", text)
+    if said:
+        text = f"{text.split('(')[0].strip()} ({said.group(1)})"
+    return " ".join(text.split())
+
+
 def write_on_root(comm, path, fn):
     """fn() on rank 0, which writes `path`; an OSError there becomes the same OutputError on every rank, so that
     all fail together (collective)."""
@@ -88,8 +99,7 @@ def write_on_root(comm, path, fn):
         try:
             return fn()
         except OSError as exc:
-            raise OutputError(f"output: cannot write {str(exc.filename or path)!r}: "
-                              f"{exc.strerror or exc}") from None
+            raise OutputError(f"output: cannot write {str(exc.filename or path)!r}: {os_reason(exc)}") from None
     return on_root(comm, guarded)
 
 

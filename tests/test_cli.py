@@ -746,7 +746,9 @@ def test_petsc_options_txt_lists_the_multigrids_defaults(tmp_path):
 @pytest.mark.parametrize("option, holder", [
     (["-qsc_ksp_monitor", "true"], "a value the option does not support"),
     (["-qsc_snes_monitor", "ascii:/nonexistent/dir/x.txt"], "a file that cannot be opened"),
-    (["-qsc_ksp_converged_reason", "true"], "a value the option does not support")])
+    (["-qsc_ksp_converged_reason", "true"], "a value the option does not support"),
+    # PETSc names the format alone (hunt34_3)
+    (["-qsc_ksp_monitor", "ascii:monitor.txt:bogusformat"], "a value the option does not support")])
 def test_a_viewer_option_with_a_bad_value_is_an_input_error(tmp_path, option, holder):
     """Viewer options given a value they do not take, or a file that cannot be opened, ended in a traceback per
     rank and MPI_Abort (exit 1), or, read at the solve's end, in a failed solve (exit 3; helper pass, session 25):

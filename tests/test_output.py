@@ -436,6 +436,20 @@ def test_a_file_it_cannot_remove_keeps_the_earlier_results(tmp_path, monkeypatch
     assert left == ["notes.json.cleared", "petsc_options.txt", "scene.resolved.toml", "summary.json"]
 
 
+@pytest.mark.skipif(not Path("/dev/full").exists(), reason="no /dev/full")
+def test_a_full_disk_is_said_in_one_line(tmp_path):
+    """HDF5's account of a failed write runs over two lines (a time stamp, then descriptors and sizes; hunt34_3):
+    the error is one line with the system's reason."""
+    from qsc_petsc.errors import OutputError
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "solution.h5").symlink_to("/dev/full")
+    with pytest.raises(OutputError) as caught:
+        run_scene(CONFIGS / "patch_test.toml", out)
+    message = str(caught.value)
+    assert "\n" not in message and message.endswith("solution.h5': Unable to create file (No space left on device)")
+
+
 # ---------------------------------------------------------------- rank independence
 
 def test_two_ranks_write_the_same_results(serial, parallel):
