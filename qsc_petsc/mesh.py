@@ -172,6 +172,9 @@ def on_root(comm, fn):
 BOX_EXACT_REACH = 1e4
 
 
+FAR_CELL_SHARE = 1e-3     # a cell's coordinates' round-off against its size above which a degenerate one is said far
+
+
 def check_cells(mesh, scene):
     """A MeshError on every rank naming the first inverted or degenerate cell of any rank (the assembly's test,
     elasticity.check_cells), before anything uses the cells: `qsc check` called a flat tet valid (hunt33_1), and a
@@ -192,8 +195,23 @@ def check_cells(mesh, scene):
         try:
             elasticity.check_cells(mesh.cell_type, mesh.coords, mesh.cells[check], mesh.cell_orig[check])
         except elasticity.DegenerateCell as exc:
-            raise MeshError(f"{mesh.describe_cell(exc.cell)} is inverted or degenerate: {exc.detail}") from None
+            xe = mesh.coords[mesh.cells[np.flatnonzero(mesh.cell_orig == exc.cell)[0]]]
+            raise MeshError(f"{mesh.describe_cell(exc.cell)} is inverted or degenerate: {exc.detail}"
+                            f"{_far_cell(xe)}") from None
     on_all(mesh.comm, sound)
+
+
+def _far_cell(xe):
+    """', its corners ... from the origin, ...' when a cell's coordinates' round-off is a fair share of its size
+    (boxes 1e16 m out: their cells' corners, 2 m apart in round-off, inverted them; the far-from-origin warning
+    that names the cause comes after the check, hunt34_3), else ''."""
+    reach = float(np.abs(xe).max())
+    known = float(np.spacing(reach))
+    size = float(np.ptp(xe, axis=0).max())
+    if known <= FAR_CELL_SHARE * size:
+        return ""
+    return (f"; its corners lie {reach:.2g} m from the origin, where coordinates are known to {known:.2g} m "
+            f"against its size {size:.2g} m: move the scene nearer to the origin")
 
 
 def on_all(comm, fn):

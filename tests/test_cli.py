@@ -401,6 +401,16 @@ def test_check_and_run_say_a_scene_too_far_from_the_origin(tmp_path):
                         "(1e+09 m out, known to 2.2e-07 m, 4.4e-07 of its element size 0.5 m), die[1]") in said[0]
 
 
+def test_a_cell_degenerate_by_round_off_says_it_is_far(tmp_path):
+    """Boxes 1e16 m out: their corners, known to 2 m, invert a 0.25 m hex; the cell check said so with no cause,
+    before the far-from-origin line could (hunt34_3). At 1e15 m the run goes on."""
+    moved = ["--set", "bodies.0.mesh.origin=[1e16,0,0]", "--set", "bodies.1.mesh.origin=[1e16,0,0.5]"]
+    code, out = qsc(["check", CONFIGS / "patch_test.toml", *moved], cwd=tmp_path)
+    assert code == 2, out
+    assert own_lines(out)[-1].endswith("its corners lie 1e+16 m from the origin, where coordinates are known to 2 m "
+                                       "against its size 0.25 m: move the scene nearer to the origin"), out
+
+
 @pytest.mark.parametrize("ranks", RANKS)
 def test_check_reports_mesh_partition_and_contact(tmp_path, ranks):
     """qsc check shall print mesh and partition statistics and the contact pair, once, and write nothing."""
