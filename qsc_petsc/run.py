@@ -2,6 +2,8 @@
 
 import atexit
 import resource
+import signal
+import threading
 import time
 import weakref
 from contextlib import contextmanager
@@ -135,6 +137,35 @@ def prepare_output(scene, out_dir, comm):
         check_output_folder(directory)
     on_root(comm, make)
     return directory
+
+
+@contextmanager
+def held_interrupts():
+    """Ctrl-C or SIGTERM (whichever raises KeyboardInterrupt here) held while a step's results are written, its
+    fields and then summary.json, and raised after: one that came between them left solution.xdmf a step ahead
+    of the summary, and a step file half written (hunt33_2). A second one goes through at once."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    caught, saved = [], {}
+
+    def hold(signum, frame):
+        if caught:
+            raise KeyboardInterrupt
+        caught.append(signum)
+
+    for number in (signal.SIGINT, signal.SIGTERM):
+        handler = signal.getsignal(number)
+        if callable(handler):         # a Python handler (Ctrl-C's, the CLI's SIGTERM), not the system's
+            saved[number] = handler
+            signal.signal(number, hold)
+    try:
+        yield
+    finally:
+        for number, handler in saved.items():
+            signal.signal(number, handler)
+    if caught:
+        raise KeyboardInterrupt
 
 
 def replace_results(directory, comm):
@@ -470,9 +501,10 @@ class Run:
                     if line and not coarse:
                         coarse = True
                         self.log(f"step {step}: warning: {line}")
-                    self.writer.write_step(step, t, point, cell)
-                    self.summary["steps"].append(record)
-                    self.write_summary()
+                    with held_interrupts():
+                        self.writer.write_step(step, t, point, cell)
+                        self.summary["steps"].append(record)
+                        self.write_summary()
                 last = stats["solves"][-1]
                 floor = last.get("round_off_floor")
                 if floor is not None and floor > ROUND_OFF_WARNING:

@@ -450,6 +450,44 @@ def test_a_full_disk_is_said_in_one_line(tmp_path):
     assert "\n" not in message and message.endswith("solution.h5': Unable to create file (No space left on device)")
 
 
+def test_an_interrupt_while_a_step_is_written_waits_for_its_summary(tmp_path, monkeypatch):
+    """Ctrl-C after a step's fields were written and before its summary: solution.xdmf held a step more than
+    summary.json (hunt33_2). The interrupt is held until the step's results are all written; a second one goes
+    through at once."""
+    import os
+    import signal
+
+    import meshio
+
+    from qsc_petsc import output
+    from qsc_petsc.run import held_interrupts
+    real = output.ResultWriter.write_step
+
+    def write_step(self, step, *args):
+        real(self, step, *args)
+        if step == 2:
+            os.kill(os.getpid(), signal.SIGINT)
+
+    monkeypatch.setattr(output.ResultWriter, "write_step", write_step)
+    out = tmp_path / "out"
+    with pytest.raises(KeyboardInterrupt):
+        run_scene(CONFIGS / "patch_test.toml", out, ["load.steps=4"])
+    summary = summary_of(out)
+    assert summary["status"] == "interrupted" and [s["step"] for s in summary["steps"]] == [1, 2]
+    with meshio.xdmf.TimeSeriesReader(str(out / "solution.xdmf")) as reader:
+        reader.read_points_cells()
+        assert reader.num_steps == 2
+    assert sorted(p.name for p in (out / "steps").iterdir()) == ["step_0001.xdmf", "step_0002.xdmf"]
+    reached = []
+    with pytest.raises(KeyboardInterrupt), held_interrupts():
+        os.kill(os.getpid(), signal.SIGINT)
+        reached.append("first held")
+        os.kill(os.getpid(), signal.SIGINT)
+        reached.append("second held")
+    assert reached == ["first held"]
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
 # ---------------------------------------------------------------- rank independence
 
 def test_two_ranks_write_the_same_results(serial, parallel):
