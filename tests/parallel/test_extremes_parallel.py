@@ -127,3 +127,16 @@ def test_a_floating_stack_is_one_answer_of_many_on_any_number_of_ranks(comm, mpi
     die = [entry["force_on_bodies"][2] for name, entry in last.items() if name.startswith("die")]
     assert len(forces) == 3 and forces[0] > 1.0
     assert forces == pytest.approx([forces[0]] * 3, rel=1e-8) and -die[0] == pytest.approx(forces[0], rel=1e-8)
+
+
+def test_a_strain_at_the_threshold_is_said_at_the_same_step_on_any_number_of_ranks(comm, mpi_tmp):
+    """The block pressed to exactly 5 % at step 1 of 2 (uniform strain): the large-strain warning came at step 1 on
+    1 rank, by round-off, and at step 2 on 2 and 3 (hunt34_2). A threshold is passed by more than round-off."""
+    lines = []
+    run, summary = run_scene(ROOT / "configs" / "block_compression.toml", mpi_tmp / "out",
+                             ["boundary.3.uz=-0.1", "load.steps=2"], comm=comm, log=lines.append)
+    run.destroy()
+    assert summary["status"] == "ok"
+    said = comm.bcast([line for line in lines if "strains reach" in line], root=0)
+    assert len(said) == 1 and said[0].startswith("step 2: warning: strains reach 0.1 (a cell near x, y, z = 0.125, "
+                                                 "0.125, 0.125)"), said
