@@ -121,6 +121,30 @@ def test_soft_dies_and_turned_bodies_say_so(tmp_path):
         assert all(any(e in w for w in warnings) for e in expected), lines
 
 
+def test_nodes_the_rows_do_not_hold_are_not_sent_to_a_stiffer_penalty(tmp_path):
+    """quasi_symmetric's nodal rows with the coarse surface as the slave at a 10x mesh ratio (formulation.md's
+    range): the fine master's nodes sank 1e-3 m, 2e5 times the pressure's p / eps_n, the stresses 3-4x off, with no
+    word (hunt32_2), then with the soft-penalty warning's advice to raise the penalty, which does not help. They are
+    said as not held, with the cures that hold them; with the finer surface as the slave nothing is said."""
+    nodal = ["contact.0.integration=nodal", "bodies.0.mesh.cells=[2,2,2]", "bodies.1.mesh.cells=[20,20,2]"]
+    coarse_slave = ['contact.0.slave="lower.zmax"', 'contact.0.master="upper.zmin"']
+    for name, (sets, expected) in {
+            "coarse slave": (nodal + coarse_slave, ("2e+05 times the penetration of the mean contact pressure (p / "
+                             "eps_n = 5e-09 m): no penalty explains that")),
+            "stiffer": (nodal + coarse_slave + ["contact.0.penalty=1e6"], "no penalty explains that"),
+            "fine slave": (nodal, None)}.items():
+        lines = []
+        run, summary = run_scene(CONFIGS / "patch_test.toml", tmp_path / name.replace(" ", "_"), sets,
+                                 log=lines.append)
+        run.destroy()
+        warnings = [line for line in lines if "warning" in line]
+        assert summary["status"] == "ok" and len(warnings) == (expected is not None), (name, lines)
+        if expected:
+            assert expected in warnings[0] and warnings[0].endswith(
+                'make the finer surface the slave, or set weight = "finer", or use two_pass or integration = '
+                '"segment"') and "raise contact[0].penalty" not in warnings[0], warnings
+
+
 def test_augmented_lagrangian_stalled_on_round_off_says_lower_the_penalty(tmp_path):
     """two_pass's augmented Lagrangian at alpha 1e8 on the patch test: its over-constrained rows' updates stand at
     ~26x their round-off estimate (past AUGMENTED_ROUND_OFF), a halved increment alike, and the run stops; the error

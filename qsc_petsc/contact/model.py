@@ -445,7 +445,8 @@ def contact_pairs_data(mesh, scene, template, mirrored=None):
         S = surface_data(mesh, pair.slave, template)
         M = surface_data(mesh, pair.master, template)
         E = min(scene.bodies[S.body].material.youngs_modulus, scene.bodies[M.body].material.youngs_modulus)
-        h_eff = min(touching_sizes(mesh, S, M))
+        sizes = touching_sizes(mesh, S, M)
+        h_eff = min(sizes)
         # each side's convex folds (the unforced warning says the deepest sunk node's), and with feature_angle its
         # feature nodes
         folds = {"slave": ridge_tilts(mesh, S, mirrored), "master": ridge_tilts(mesh, M, mirrored)}
@@ -455,7 +456,7 @@ def contact_pairs_data(mesh, scene, template, mirrored=None):
             features = {"slave": folds["slave"] > angle, "master": folds["master"] > angle,
                         "sharp": {"slave": np.zeros(len(S.nodes), dtype=bool),
                                   "master": np.zeros(len(M.nodes), dtype=bool)}}
-        pairs.append({"index": i, "spec": pair, "slave": S, "master": M, "h_eff": h_eff,
+        pairs.append({"index": i, "spec": pair, "slave": S, "master": M, "h_eff": h_eff, "sizes": sizes,
                       "eps_n": pair.penalty * E / h_eff,
                       "radius": pair.search_distance * h_eff * (1.0 + REACH_SLACK),
                       "features": features, "folds": folds,
@@ -539,6 +540,10 @@ UNFORCED_RATIO = 10.0
 # they read p / eps_n to 0.1 % (hunt33_6); a faceted sphere's nodes read 1000x their p / eps_n off by its facets'
 # sagitta, which no rule on their sign could tell from round-off
 DEEP_PENETRATION = 0.1
+# ... and pressed nodes that sink this many times their mean pressure's p / eps_n are not the penalty's doing: their
+# rows do not hold them (quasi_symmetric's nodal rows, coarse slave, 10x mesh ratio: 2e5; hunt32_2)
+UNHELD_DEPTH = 100.0
+COARSER = 1.2            # a surface whose touching faces are this much larger than the other's is the coarser
 ROUND_OFF_PENETRATION = 10.0
 # ... and pressed nodes (of a pair or a die) deeper than SOFT_PENALTY x the largest displacement of the bodies they
 # belong to: flat_punch (coarse) at alpha 1 was 11 % low with its deepest node at 0.024 h_eff and 0.18 of the
@@ -1331,6 +1336,31 @@ class ContactModel:
             normal = np.where(length[:, None] > 0, flat / np.where(length > 0, length, 1.0)[:, None], normal)
         return area, normal
 
+    def _unheld(self, pd, deepest, expected):
+        """The warning line for a pair whose pressed nodes sink UNHELD_DEPTH times deeper than its mean pressure's
+        p / eps_n: no penalty explains that, so its rows do not hold them (quasi_symmetric's nodal rows with the
+        coarse surface as the slave at a 10x mesh ratio: the fine master's nodes sank 1e5 p / eps_n, the stresses
+        3-4x off, and the soft-penalty warning sent the user to raise the penalty; hunt32_2)."""
+        spec = pd["spec"]
+        name = f"contact[{pd['index']}]"
+        if spec.integration == "nodal" and spec.formulation != "two_pass":
+            qs = spec.formulation == "quasi_symmetric"
+            cure = ("quasi_symmetric's nodal rows hold the master's nodes through the slave's multipliers" if qs else
+                    "master_slave's nodal rows hold the master's nodes only where slave nodes press them")
+            if pd["sizes"][0] > COARSER * pd["sizes"][1]:        # the slave's faces are the larger
+                cure += (", which a coarser slave spreads over many of them" if qs else ", and a coarser slave has few")
+                cure += ": make the finer surface the slave" + (", or set weight = \"finer\"" if qs else "") + ", or"
+            else:
+                cure += ":"
+            cure += " use two_pass or integration = \"segment\""
+        else:
+            cure = "refine the coarser surface, or use two_pass with integration = \"segment\""
+        return (f"{name}: pressed nodes penetrate the other surface by up to {deepest:.3g} m = "
+                f"{deepest / pd['h_eff']:.2g} h_eff, {deepest / expected:.2g} times the penetration of the mean "
+                f"contact pressure (p / eps_n = {expected:.3g} m): no penalty explains that, so the rows do not hold "
+                f"those nodes, and the stresses and displacements near them are off by about as much; a larger "
+                f"penalty does not help: {cure}")
+
     def _feature_advice(self, pd, fold, sides):
         """What feature_angle can do for the sunk nodes of `sides` whose surface folds `fold` degrees there
         (ridge_tilts)."""
@@ -1432,6 +1462,8 @@ class ContactModel:
             if spec.enforcement == "penalty" and (name, "deep") not in self.slip_warned:
                 line = _soft_penalty(name, deepest, pd["h_eff"], scale, spec.penalty, pd["eps_n"], "the other surface",
                                      precision)
+                if line and deepest > UNHELD_DEPTH * expected > 0:
+                    line = self._unheld(pd, deepest, expected)
                 if line:
                     self.slip_warned.add((name, "deep"))
                     lines.append(line)
