@@ -22,6 +22,9 @@ HEX_FACES = np.array([[3, 0, 4, 7], [1, 2, 6, 5], [0, 1, 5, 4],
 # tet face i is the face opposite node i
 TET_FACES = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]])
 CELL_FACES = {"hex": HEX_FACES, "tet": TET_FACES}
+# each cell's edges, as pairs of its local corners
+CELL_EDGES = {"hex": ((0, 1), (1, 2), (2, 3), (3, 0), (4, 5), (5, 6), (6, 7), (7, 4), (0, 4), (1, 5), (2, 6), (3, 7)),
+              "tet": ((0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3))}
 
 _HEX_SIGNS = np.array([[-1, -1, -1], [1, -1, -1], [1, 1, -1], [-1, 1, -1],
                        [-1, -1, 1], [1, -1, 1], [1, 1, 1], [-1, 1, 1]], dtype=float)

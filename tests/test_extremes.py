@@ -98,8 +98,8 @@ def test_warnings_do_not_depend_on_the_length_unit_or_travel(tmp_path):
 def test_soft_dies_and_turned_bodies_say_so(tmp_path):
     """Runs that ended "ok" with no word (hunt33_6): dies at alpha 0.1 under configs/flat_punch.toml (the punch's
     force 45 % low: its nodes sank 0.37 and 0.52 of the bodies' largest displacement), the punch's pair at alpha 1
-    (11 % low, 0.18 of it, 0.012 element sizes), and a cantilever turned 0.45 rad (its linear answer stretched 5 %,
-    its strains 0.004)."""
+    (11 % low, 0.18 of it, 0.012 element sizes), a cantilever turned 0.45 rad (its linear answer stretched 5 %,
+    its strains 0.004), and a short one bent to 7 % strain at its root, read 3.4 % at its cells' centroids."""
     coarse = ["bodies.0.mesh.cells=[8,8,4]", "bodies.1.mesh.cells=[6,6,6]"]
     beam = tmp_path / "beam.toml"
     beam.write_text('name = "beam"\n[[bodies]]\nname = "b"\nmesh = { type = "box", origin = [0.0, 0.0, 0.0], '
@@ -111,7 +111,11 @@ def test_soft_dies_and_turned_bodies_say_so(tmp_path):
              "pair": (CONFIGS / "flat_punch.toml", coarse + ["contact.0.penalty=1"],
                       ["contact[0]: pressed nodes penetrate the other surface"]),
              "sound": (CONFIGS / "flat_punch.toml", coarse, []),
-             "beam": (beam, [], ["rotations reach 0.45 rad"])}
+             "beam": (beam, [], ["rotations reach 0.45 rad"]),
+             # bent two cells thick, its centroids at a quarter of its depth read half its fibres' strain: 0.034, no
+             # word, against 0.061-0.070 at the root (hunt33_6); its edges' stretch reads the fibres'
+             "bent": (beam, ["bodies.0.mesh.size=[2,0.4,0.4]", "bodies.0.mesh.cells=[20,2,2]", "boundary.1.uz=-0.5"],
+                      ["strains reach 0.07 (a cell near x, y, z = 0.15, 0.1, 0.1)"])}
     for name, (scene, sets, expected) in cases.items():
         lines = []
         run, summary = run_scene(scene, tmp_path / name, sets, log=lines.append)

@@ -457,10 +457,7 @@ def test_an_interrupt_while_a_step_is_written_waits_for_its_summary(tmp_path, mo
     import os
     import signal
 
-    import meshio
-
     from qsc_petsc import output
-    from qsc_petsc.run import held_interrupts
     real = output.ResultWriter.write_step
 
     def write_step(self, step, *args):
@@ -469,7 +466,22 @@ def test_an_interrupt_while_a_step_is_written_waits_for_its_summary(tmp_path, mo
             os.kill(os.getpid(), signal.SIGINT)
 
     monkeypatch.setattr(output.ResultWriter, "write_step", write_step)
-    out = tmp_path / "out"
+    # Ctrl-C's own handler, whatever an earlier test or library left (the suite once ran this with SIGINT at the
+    # system's default, which ended the process)
+    earlier = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        _interrupt_while_writing(tmp_path / "out")
+    finally:
+        signal.signal(signal.SIGINT, earlier)
+
+
+def _interrupt_while_writing(out):
+    import os
+    import signal
+
+    import meshio
+
+    from qsc_petsc.run import held_interrupts
     with pytest.raises(KeyboardInterrupt):
         run_scene(CONFIGS / "patch_test.toml", out, ["load.steps=4"])
     summary = summary_of(out)
