@@ -805,3 +805,57 @@ def test_finite_sliding_says_when_its_slip_per_step_grows(tmp_path):
     assert contact_model._overshooting([0.01, 0.02, 0.015, 0.03, 0.02, 0.06, 0.05, 0.09], 1.0)   # alternating growth
     # a contact that starts sliding within the window: from nothing is no growth (a 30-degree tilt, hunt31_4)
     assert not contact_model._overshooting([0.0, 0.0199, 0.0198, 0.0209, 0.021, 0.027, 0.0295], 0.1)
+
+
+DRAGGED = """name = "dragged"
+[[bodies]]
+name = "lower"
+mesh = { type = "box", origin = [0.0, 0.0, 0.0], size = [3.0, 1.0, 0.5], cells = [24, 8, 4] }
+material = { youngs_modulus = 1000.0, poissons_ratio = 0.3 }
+[[bodies]]
+name = "upper"
+mesh = { type = "box", origin = [0.25, 0.25, 0.5], size = [0.5, 0.5, 0.5], cells = [8, 8, 8] }
+material = { youngs_modulus = 1000.0, poissons_ratio = 0.3 }
+[[contact]]
+slave = "upper.zmin"
+master = "lower.zmax"
+formulation = "quasi_symmetric"
+sliding = "large"
+[[die]]
+name = "bottom"
+point = [0.0, 0.0, 0.0]
+normal = [0.0, 0.0, 1.0]
+surfaces = ["lower.zmin"]
+condition = "sticking"
+[[die]]
+name = "top"
+point = [0.0, 0.0, 1.0]
+normal = [0.0, 0.0, -1.0]
+motion = [0.225, 0.0, -0.00075]
+surfaces = ["upper.zmax"]
+condition = "sticking"
+[load]
+steps = 3
+[petsc]
+ksp_type = "preonly"
+pc_type = "lu"
+pc_factor_mat_solver_type = "mumps"
+"""
+
+
+def test_a_damped_newton_step_is_no_converged_one(tmp_path):
+    """A cube dragged 0.225 m over a long block by a sticking die: the damped Newton steps of step 3 found no
+    halving that lowered the residual, took 1/256 of the step, and the step-size test read that as converged, the
+    residual at 1.4 of its force scale: the lower block out of balance by 70 % of the normal force, "ok", with a
+    round-off warning that sent the user to lower a penalty (hunt35_1). The step-size test reads the undamped step,
+    and the run ends in balance."""
+    path = tmp_path / "dragged.toml"
+    path.write_text(DRAGGED)
+    lines = []
+    run, summary = run_scene(path, tmp_path / "out", log=lines.append)
+    run.destroy()
+    assert summary["status"] == "ok" and not [line for line in lines if "warning" in line], lines
+    last = summary["steps"][-1]["contact"]
+    contact = np.array(last["contact[0] upper.zmin / lower.zmax"]["force_on_master"])
+    bottom = np.array(last["die[0] bottom"]["force_on_bodies"])
+    assert -contact[2] > 0.2 and np.abs(contact + bottom).max() < -1e-8 * contact[2], (contact, bottom)
