@@ -146,9 +146,9 @@ class Restraint:
         return self.seen[term]
 
     def loose(self, terms, u=None):
-        """The motions that only active rows carrying no force hold (their pressure at most LOOSE_SHARE of the
-        largest row pressure of all terms, or of the term's pressure_floor, that of a strain of FLOOR_STRAIN, if
-        that is larger): {body name: [mode names]}, empty if the boundary conditions and the rows that press hold
+        """The motions that no boundary and no active row carrying force holds (a row's pressure at most
+        LOOSE_SHARE of the largest row pressure of all terms, or of the term's pressure_floor, that of a strain of
+        FLOOR_STRAIN, if that is larger, carries none): {body name: [mode names]}, empty if the boundary conditions and the rows that press hold
         every body (collective). Such a body sits where the Newton iterations left it: any position along those
         motions that keeps its rows open is an equilibrium too. Without the floor, when every force was round-off
         (a stack not loaded yet, 3e-15 N at most) round-off rows counted as pressing and only some of the loose
@@ -162,8 +162,9 @@ class Restraint:
             # ... nor one whose force is its own round-off (ConstraintTerm.round_off): rows whose gap closed to
             # round-off held the bodies of a floating stack, of which only the top one was named (hunt32_1)
             pressing = [p & (f > LOOSE_ROUND_OFF * term.round_off(u)) for p, f, term in zip(pressing, forces, terms)]
-        if self.comm.allreduce(all(np.array_equal(p, term.active) for p, term in zip(pressing, terms)), op=MPI.LAND):
-            return {}                   # every active row carries force: the solve's own check holds
+        # every active row may carry force and a body still be free: a solve converges with a body held by no row
+        # when the residual does not load it (free_load); three blocks between open gaps ended "ok" with no word on
+        # 2 ranks, every row open (hunt35_2)
         return self.free(terms, True, pressing)
 
     def destroy(self):

@@ -504,8 +504,8 @@ class Run:
                         if loose:
                             record["loose"] = loose
                         if loose and loose != last_loose:
-                            self.log(f"step {step}: warning: {loose}: held there only by contact rows that carry "
-                                     f"no force, so the scene does not set its position along that motion (this "
+                            self.log(f"step {step}: warning: {loose}: held there by no boundary and only by "
+                                     f"contact rows that carry no force, if any, so the scene does not set its position along that motion (this "
                                      f"answer is one of many); hold it with a boundary condition, or a die or "
                                      f"contact within reach that presses on it (summary: loose)")
                         last_loose = loose

@@ -140,3 +140,33 @@ def test_a_strain_at_the_threshold_is_said_at_the_same_step_on_any_number_of_ran
     said = comm.bcast([line for line in lines if "strains reach" in line], root=0)
     assert len(said) == 1 and said[0].startswith("step 2: warning: strains reach 0.1 (a cell near x, y, z = 0.125, "
                                                  "0.125, 0.125)"), said
+
+
+def _gapped_blocks():
+    """Three blocks 0.01 m apart on rollers between frictionless dies, the top die moving just to touch (hunt35_2)."""
+    text = 'name = "gapped"\n'
+    for b, (z, n) in enumerate(((0.0, 3), (0.51, 4), (1.02, 3))):
+        text += (f'[[bodies]]\nname = "b{b}"\nmesh = {{ type = "box", origin = [0.0, 0.0, {z}], size = [1.0, 1.0, '
+                 f'0.5], cells = [{n}, {n}, 2] }}\nmaterial = {{ youngs_modulus = 1000.0 }}\n')
+        text += "".join(f'[[boundary]]\nsurface = "b{b}.{side}"\ntype = "symmetry"\n' for side in ("xmin", "ymin"))
+        if b:
+            text += (f'[[contact]]\nslave = "b{b}.zmin"\nmaster = "b{b - 1}.zmax"\nformulation = "quasi_symmetric"\n'
+                     'search_distance = 2.0\n')
+    return text + ('[[die]]\nname = "bottom"\npoint = [0.0, 0.0, 0.0]\nnormal = [0.0, 0.0, 1.0]\nsurfaces = '
+                   '["b0.zmin"]\n[[die]]\nname = "top"\npoint = [0.0, 0.0, 1.52]\nnormal = [0.0, 0.0, -1.0]\n'
+                   'motion = [0.0, 0.0, -0.01]\nsurfaces = ["b2.zmax"]\n[petsc]\nksp_type = "preonly"\npc_type = '
+                   '"lu"\npc_factor_mat_solver_type = "mumps"\n')
+
+
+def test_blocks_held_by_no_row_are_named_loose_on_any_number_of_ranks(comm, mpi_tmp):
+    """Three blocks between gaps the top die only closes: on 2 ranks the step ended "ok" with every row open, the
+    blocks wherever a singular factorization put them, and no word, while 1 and 3 ranks ended touching and said
+    them loose (hunt35_2). Bodies held by no row at all are loose too."""
+    path = mpi_tmp / "gapped.toml"
+    if comm.rank == 0:
+        path.write_text(_gapped_blocks())
+    comm.Barrier()
+    run, summary = run_scene(path, mpi_tmp / "out", comm=comm)
+    run.destroy()
+    assert summary["status"] == "ok"
+    assert summary["steps"][0]["loose"] == "b0 (translation z); b1 (translation z); b2 (translation z)"
