@@ -543,6 +543,9 @@ DEEP_PENETRATION = 0.1
 # ... and pressed nodes that sink this many times their mean pressure's p / eps_n are not the penalty's doing: their
 # rows do not hold them (quasi_symmetric's nodal rows, coarse slave, 10x mesh ratio: 2e5; hunt32_2)
 UNHELD_DEPTH = 100.0
+# ... for a pair whose pressure strains the bodies more than this (p / E; the run's round-off warning reads loads
+# below it, FLOOR_SHARE x FLOOR_STRAIN)
+LOADED_STRAIN = 1e-8
 COARSER = 1.2            # a surface whose touching faces are this much larger than the other's is the coarser
 ROUND_OFF_PENETRATION = 10.0
 # ... and pressed nodes (of a pair or a die) deeper than SOFT_PENALTY x the largest displacement of the bodies they
@@ -1459,7 +1462,11 @@ class ContactModel:
                     f"\"large\"")
             deepest, mean, expected, far, scale = self.pressed_depth.get(pd["index"], (0.0,) * 5)
             precision = ROUND_OFF_PENETRATION * np.finfo(float).eps * far
-            if spec.enforcement == "penalty" and (name, "deep") not in self.slip_warned:
+            # a pair that carries no load to speak of has no penalty soft for it: a stack's pairs at 1e-11 N (a strain
+            # of 1e-14), their depths the solve's round-off (1e-15 to 8e-14 m), were said soft, other pairs on
+            # other numbers of ranks (hunt35_2)
+            strain = expected * spec.penalty / pd["h_eff"]
+            if spec.enforcement == "penalty" and strain > LOADED_STRAIN and (name, "deep") not in self.slip_warned:
                 line = _soft_penalty(name, deepest, pd["h_eff"], scale, spec.penalty, pd["eps_n"], "the other surface",
                                      precision)
                 if line and deepest > UNHELD_DEPTH * expected > 0:
@@ -1469,7 +1476,6 @@ class ContactModel:
                     lines.append(line)
             # a pressure of a strain below 1e-10 (p / E = alpha p / (eps_n h_eff)) is itself round-off: rows that hold
             # a loose stack with no load carry 1e-11 Pa
-            strain = expected * spec.penalty / pd["h_eff"]
             if spec.enforcement == "penalty" and 0 < expected < precision and strain > 1e-10 and \
                     (name, "round-off") not in self.slip_warned:
                 self.slip_warned.add((name, "round-off"))

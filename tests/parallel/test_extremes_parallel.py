@@ -170,3 +170,20 @@ def test_blocks_held_by_no_row_are_named_loose_on_any_number_of_ranks(comm, mpi_
     run.destroy()
     assert summary["status"] == "ok"
     assert summary["steps"][0]["loose"] == "b0 (translation z); b1 (translation z); b2 (translation z)"
+
+
+def test_pairs_that_carry_no_load_have_no_soft_penalty(comm, mpi_tmp):
+    """The floating stack under the iterative defaults: at step 1 nothing carries force (1e-11 N), and pairs whose
+    depths were the solve's round-off (1e-15 to 8e-14 m) were said to have a soft penalty, contact[0] on 1 rank,
+    contact[1] and [2] on 2 (hunt35_2), or their rows not to hold them (the depths 1e5 times the pressure's p / eps_n).
+    Pairs with a pressure below a strain of 1e-8, where the run's round-off warning reads loads, say neither."""
+    path = mpi_tmp / "stack.toml"
+    if comm.rank == 0:
+        path.write_text(_floating_stack().split("[petsc]")[0])
+    comm.Barrier()
+    lines = []
+    run, summary = run_scene(path, mpi_tmp / "out", comm=comm, log=lines.append)
+    run.destroy()
+    assert summary["status"] == "ok"
+    said = [line for line in comm.bcast(lines, root=0) if "is soft for this load" in line or "no penalty explains" in line]
+    assert not said, said
