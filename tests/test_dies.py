@@ -671,3 +671,73 @@ def test_a_body_carried_onto_a_sliding_die_sticks_where_it_meets_it(tmp_path, st
     _, summary = run_scene(_write(tmp_path, "tiny", tiny), tmp_path / "tiny", log=logged.append)
     assert summary["status"] == "ok"
     assert any("met a sticking die within the first 1/64 of the run's first increment" in line for line in logged)
+
+
+CARRIED = """name = "carried"
+[[bodies]]
+name = "lower"
+mesh = { type = "box", origin = [0.0, 0.0, 0.0], size = [2.0, 1.0, 0.5], cells = [10, 5, 3] }
+material = { youngs_modulus = 1e7, poissons_ratio = 0.3 }
+[[bodies]]
+name = "upper"
+mesh = { type = "box", origin = [0.25, 0.25, 0.5], size = [0.5, 0.5, 0.5], cells = [4, 4, 4] }
+material = { youngs_modulus = 1000.0, poissons_ratio = 0.3 }
+[[boundary]]
+surface = "lower.zmin"
+type = "displacement"
+ux = 0.0
+uy = 0.0
+uz = 0.0
+[[boundary]]
+surface = "upper.ymin"
+type = "symmetry"
+[[contact]]
+slave = "upper.zmin"
+master = "lower.zmax"
+formulation = "quasi_symmetric"
+penalty = 1e4
+sliding = "finite"
+[[die]]
+name = "push"
+point = [0.25, 0.0, 0.0]
+normal = [1.0, 0.0, 0.0]
+motion = [1.0, 0.0, 0.0]
+surfaces = ["upper.xmin"]
+condition = "frictionless"
+[[die]]
+name = "front"
+point = [0.75, 0.0, 0.0]
+normal = [-1.0, 0.0, 0.0]
+motion = [0.9975, 0.0, 0.0]
+surfaces = ["upper.xmax"]
+condition = "frictionless"
+[[die]]
+name = "top"
+point = [0.0, 0.0, 1.0]
+normal = [0.0, 0.0, -1.0]
+motion = [0.0, 0.0, -0.005]
+surfaces = ["upper.zmax"]
+condition = "frictionless"
+[load]
+steps = 5
+[petsc]
+ksp_type = "preonly"
+pc_type = "lu"
+pc_factor_mat_solver_type = "mumps"
+"""
+
+
+def test_a_die_that_moves_away_keeps_the_nodes_it_holds(tmp_path):
+    """A block carried 1 m between a pushing die and one in front moving away along its normal (0.5 % squeeze): the
+    front die's reach was measured from where it stands at the increment's end, so every node it held dropped its
+    row, and the solve failed OUT_OF_REACH saying they were out of reach at the increment's start (cutbacks, or
+    exit 3; hunt35_1). Its reach covers where it stands at the start too: 2 increments, no cutback, the squeeze's
+    force on both dies."""
+    path = tmp_path / "carried.toml"
+    path.write_text(CARRIED)
+    run, summary = run_scene(path, tmp_path / "out", ["load.steps=2", "solver.max_cutbacks=0"])
+    run.destroy()
+    assert summary["status"] == "ok"
+    last = summary["steps"][-1]["contact"]
+    push, front = last["die[0] push"]["force_on_bodies"][0], last["die[1] front"]["force_on_bodies"][0]
+    assert push > 1.0 and front == pytest.approx(-push, rel=1e-6)

@@ -770,7 +770,9 @@ class ContactModel:
                 # sides' areas (the contact area 1.5 for a 1 m2 face)
                 S = dd["surface"]
                 turned = _turned_to_die(mesh, dd, X + U)
-                within = -_die_depth(dd, X, U, t) <= dd["radius"]
+                # within reach of the die where it stands at the increment's start or end: one that moves away
+                # dropped, from its end, every node it held at the start (OUT_OF_REACH after cutbacks; hunt35_1)
+                within = -np.maximum(_die_depth(dd, X, U, t0), _die_depth(dd, X, U, t)) <= dd["radius"]
                 near = within & turned
                 dd["near"] = near                   # the nodes with rows (missed)
                 dd["away"] = within & ~turned       # within reach, of faces turned away (missed, contact_plan)
