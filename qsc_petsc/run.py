@@ -22,6 +22,7 @@ from .restraint import Restraint, describe
 from .scene import PETSC_DEFAULTS
 from .solver import (
     AUGMENTED_ROUND_OFF,
+    AUGMENTED_SLIVER,
     FLOOR_STRAIN,
     ROUND_OFF_WARNING,
     System,
@@ -537,6 +538,15 @@ class Run:
                              f"round-off (eps_n times the rows' precision: {bound / AUGMENTED_ROUND_OFF:.2g}), below which no update can go; the answer "
                              f"holds to that. A lower penalty meets the tolerance: the augmented Lagrangian needs no "
                              f"stiff one")
+                for name, rows, share, tol in last.get("augmented_penalty_rows") or ():
+                    if (name, "penalty rows") not in self.round_off_said:
+                        self.round_off_said.add((name, "penalty rows"))
+                        self.log(f"step {step}: warning: {rows} row(s) of {name} keep no augmented multiplier (their "
+                                 f"stiffness on their own nodes below {AUGMENTED_SLIVER:g} of the largest: slivers "
+                                 f"past an edge, whose multipliers the updates would grow without moving their gaps) "
+                                 f"and carry {share:.2g} of its normal force, above its augmented_tolerance {tol:g}: "
+                                 f"there the answer is the penalty's, off the stiff limit by about their share of its "
+                                 f"compliance; a larger penalty narrows it (summary: augmented_penalty_rows)")
                 # both counts over every try of the step, cut back or not (the summary's snes/ksp_iterations)
                 self.log(f"step {step}/{n_steps}: load factor {t:.4g}, {record['snes_iterations']} Newton / "
                          f"{record['ksp_iterations']} Krylov iterations, "

@@ -119,6 +119,7 @@ class ConstraintTerm:
         self.DG = self.product = None
         self.G_abs = None        # |G|, for the augmented Lagrangian's round-off (_row_scale)
         self.own = None          # the rows' stiffness on their own nodes (own_stiffness)
+        self.sliver = None       # the rows the last Uzawa step kept as penalty rows (next_multipliers)
         # the d the product holds (None once it is changed in place); its pattern (G^T G's) and the pattern's digest
         self.product_d = self.pattern = self.pattern_digest = None
         w = W.getArray()
@@ -264,6 +265,17 @@ class ConstraintTerm:
             self.own = np.divide(size, self.W.getArray()[self.rows] * k_n, out=np.zeros(len(k)), where=size > 0)
         return self.own
 
+    def penalty_share(self):
+        """(rows, share): the rows the last next_multipliers kept as penalty rows (slivers) that carry force, and
+        their share of the term's normal force (collective). There the answer is the penalty's: an overhang's edge
+        rows left the augmented Lagrangian 7.6e-4 from the stiff limit at alpha 1e4, tolerance 1e-6 (hunt35_1)."""
+        force = np.abs(self.m.getArray()[self.rows] * self.W.getArray()[self.rows])
+        sliver = self.sliver if self.sliver is not None else np.zeros(len(force), dtype=bool)
+        comm = self.G.getComm().tompi4py()
+        rows, part, total = comm.allreduce(
+            np.array([np.sum(sliver & (force > 0)), force[sliver].sum(), force.sum()]), op=MPI.SUM)
+        return int(rows), (part / total if total > 0 else 0.0)
+
     def next_multipliers(self, u, stiffness):
         """The augmented Lagrangian's Uzawa step from the last evaluate, at u, not applied: (new multipliers, their
         relative change, the change's round-off bound, AUGMENTED_ROUND_OFF) (collective). Left unapplied once every
@@ -284,6 +296,7 @@ class ConstraintTerm:
         top = comm.allreduce(float(np.nanmax(own, initial=0.0)), op=MPI.MAX)
         sliver = np.nan_to_num(own, nan=np.inf) < AUGMENTED_SLIVER * top
         new[sliver] = 0.0
+        self.sliver = sliver
         # the multipliers' round-off (round_off), on the rows that hold one: the floor of the updates' change
         # (AUGMENTED_ROUND_OFF)
         held = ~sliver & ((new > 0) | (self.lmbda > 0))
@@ -1243,6 +1256,7 @@ def _merge(stats, more):
     if "multipliers_unsettled" in more:     # the outcome's: why a later solve of the try failed
         stats["multipliers_unsettled"] = more["multipliers_unsettled"]
     stats["multipliers_at_round_off"] = more.get("multipliers_at_round_off")     # the answer's multipliers'
+    stats["augmented_penalty_rows"] = more.get("augmented_penalty_rows", [])
 
 
 def _solve_enforced(system, step, t, start, augmented_max):
@@ -1265,6 +1279,9 @@ def _solve_enforced(system, step, t, start, augmented_max):
                     if change > term.augmented_tolerance]
             if over:
                 stats["multipliers_at_round_off"] = max(over, key=lambda entry: entry[1] / entry[2])
+            # the rows that kept no multiplier, where they carry more of the force than the tolerance (Run)
+            shares = [(term.name, *term.penalty_share(), term.augmented_tolerance) for term in augmented]
+            stats["augmented_penalty_rows"] = [entry for entry in shares if entry[2] > entry[3]]
             break
         if outer > augmented_max:          # augmented_max updates applied, and this one's test not met
             ok = False
