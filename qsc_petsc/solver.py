@@ -1098,6 +1098,13 @@ class System:
                 self.closed_rows[term.name] = closed
         if reason <= 0 and self.free_seen:
             stats["free_motion"] = self.free_seen
+            if self.free_now and self.free_load is not None:
+                # whether the last residual loads the free motion: a body pulled off its only support has no
+                # equilibrium; one floating between open gaps has many, and only its singular Jacobian failed an
+                # iterative solve (a stack with gaps under the defaults: exit 3 on 1 and 2 ranks saying "no
+                # equilibrium", ok on 3; hunt35_2)
+                loaded = self.free_load(self.terms, self.snes.getFunction()[0])
+                stats["free_loaded"] = bool(loaded > self.snes.getTolerances()[0] * self.force_scale)
         if self.mumps_relaxation is not None:
             stats["mumps_icntl_14"] = self.mumps_relaxation
         if self.mumps_cap is not None:
@@ -1409,6 +1416,15 @@ def solve_load_step(system, step, t_prev, t_target, u, update_terms, max_cutback
             free = stats.get("free_motion", "")
             why = (f"; an iterate left {free} held by no boundary and no closed contact row (a body held only "
                    f"by contact that separates has no equilibrium)") if free else ""
+            if free and stats.get("free_loaded") is False and not _single_application(system):
+                ksp = system.snes.getKSP()
+                pc = ksp.getPC().getType()
+                solve = f"{ksp.getType()} + {'the contact band preconditioner' if pc == 'python' else pc}"
+                why = (f"; an iterate left {free} held by no boundary and no closed contact row and no load on it "
+                       f"(bodies between open gaps: an equilibrium, one of many), its Jacobian singular, which the "
+                       f"linear solve ({solve}) could not take: a direct "
+                       f"solver does (-qsc_ksp_type preonly -qsc_pc_type lu -qsc_pc_factor_mat_solver_type mumps), "
+                       f"or hold the bodies (a boundary, or a die that presses them)")
             single = _single_application(system)
             if single:
                 # its Newton steps are not the Jacobian's: wrong iterates open rows that hold, so the free
