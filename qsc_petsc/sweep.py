@@ -293,7 +293,7 @@ def _mpirun_version(mpirun):
 
 _LAUNCHER_NOISE = re.compile(r"^(\[[^\]]*:\d+\]|Primary job|mpirun|a non-zero exit|Process name|Exit code|"
                             r"the job to be terminated|job has been|MPI_ABORT|with errorcode|NOTE: invoking|"
-                            r"You may or may not|exactly when|-+$|=+$)")
+                            r"You may or may not|exactly when|-+$|=+$|\*+$)")
 
 
 def _last_error_line(stdout, stderr):
@@ -304,6 +304,10 @@ def _last_error_line(stdout, stderr):
     for line in reversed(stdout.splitlines() + stderr.splitlines()):
         if line.startswith(("qsc: error:", "qsc: solve failed:")):
             return line.split(": ", 1)[1]
+    if "mpirun does not support recursive calls" in stdout + stderr:
+        # the sweep itself started under mpirun: every run "failed (*****)", Open MPI's banner (hunt35_2)
+        return ("mpirun does not support recursive calls: run qsc sweep without mpirun (it starts each run's own "
+                "mpirun)")
     for text in (stderr, stdout):
         lines = [ln.strip() for ln in text.splitlines()]
         lines = [re.sub(r"^\[\d+\]\s*", "", ln) for ln in lines if ln and not _LAUNCHER_NOISE.match(ln)]

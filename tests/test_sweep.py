@@ -264,3 +264,13 @@ def test_ctrl_c_stops_the_run_it_was_on(tmp_path, mpi_env):
     while left() and time.time() < deadline:
         time.sleep(0.5)
     assert not left(), left()
+
+
+def test_a_sweep_under_mpirun_says_why_its_runs_fail():
+    """qsc sweep started under mpirun: each run's mpirun refused a recursive call, and every row read "failed
+    (*****...)", Open MPI's banner (hunt35_2)."""
+    from qsc_petsc.sweep import _last_error_line
+    banner = ("\n\n" + "*" * 58 + "\n\nmpirun does not support recursive calls\n\n" + "*" * 58 + "\n")
+    assert _last_error_line("", banner).startswith("mpirun does not support recursive calls: run qsc sweep without")
+    assert _last_error_line("", "[0] Unable to find requested PC type x\n" + "*" * 10 + "\n") == \
+        "Unable to find requested PC type x"
