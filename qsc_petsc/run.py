@@ -548,8 +548,11 @@ class Run:
                                  f"there the answer is the penalty's, off the stiff limit by about their share of its "
                                  f"compliance; a larger penalty narrows it (summary: augmented_penalty_rows)")
                 # both counts over every try of the step, cut back or not (the summary's snes/ksp_iterations)
+                # the augmented Lagrangian's updates too: its step line gave "130 Newton / 130 Krylov" alone (hunt35_1)
+                updates = sum(solve.get("augmented_iterations", 0) for solve in stats["solves"])
                 self.log(f"step {step}/{n_steps}: load factor {t:.4g}, {record['snes_iterations']} Newton / "
-                         f"{record['ksp_iterations']} Krylov iterations, "
+                         f"{record['ksp_iterations']} Krylov iterations"
+                         + (f" / {updates} augmented updates" if updates else "") + ", "
                          f"{last['snes_reason']}{_kept_rows(record.get('contact', {}))}")
                 if last.get("tied_in_tension"):
                     self.log(f"step {step}: note: {last['tied_in_tension']} sticking die node(s) held in slight "

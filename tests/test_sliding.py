@@ -916,3 +916,6 @@ def test_augmented_rows_left_to_the_penalty_are_said(tmp_path):
     name, rows, share, tol = summary["steps"][-1]["solves"][-1]["augmented_penalty_rows"][0]
     assert name == "contact[0]" and rows > 0 and share > tol == 1e-6
     assert all(not step["solves"][-1]["augmented_penalty_rows"] for step in summary["steps"][:-1])
+    # the step line counts the updates too (it gave the Newton and Krylov counts alone; hunt35_1)
+    updates = sum(solve["augmented_iterations"] for solve in summary["steps"][-1]["solves"])
+    assert any(line.startswith("step 5/5: ") and f" / {updates} augmented updates, " in line for line in lines), lines
