@@ -1507,8 +1507,16 @@ def _check_held(system, step):
 
 
 def free_motion_error(step, free):
-    """The SceneError for a load step whose boundaries and rows within reach leave the motions `free` (restraint.describe)
-    free; `qsc check` raises it for the first step too."""
+    """The error for a load step whose boundaries and rows within reach leave the motions `free` (restraint.describe)
+    free: the scene's at the first step (SceneError; `qsc check` raises it too), the earlier steps' outcome after it
+    (ConvergenceError: a block pushed off its support ended 17 steps with "add a boundary condition", exit 2, as if
+    the scene were wrong; hunt35_1)."""
+    if step > 1:
+        return ConvergenceError(
+            f"load step {step}: free rigid-body motion of {free}: the earlier steps moved it out of the reach of "
+            f"every contact row and die that held it, and no displacement or symmetry boundary holds it (frictionless "
+            f"contact holds the normal direction only), so it has no equilibrium past there; hold it with a "
+            f"boundary condition, or raise the search_distance of the pair or die that should still reach it")
     return SceneError(f"load step {step}: free rigid-body motion of {free}: no displacement or symmetry boundary holds "
                       f"it and no contact row or die within reach does (frictionless contact holds the normal "
                       f"direction only); add a boundary condition")

@@ -741,3 +741,13 @@ def test_a_die_that_moves_away_keeps_the_nodes_it_holds(tmp_path):
     last = summary["steps"][-1]["contact"]
     push, front = last["die[0] push"]["force_on_bodies"][0], last["die[1] front"]["force_on_bodies"][0]
     assert push > 1.0 and front == pytest.approx(-push, rel=1e-6)
+
+
+def test_a_body_the_earlier_steps_left_free_is_a_failed_solve_not_bad_input():
+    """A block pushed by one die along frictionless supports slid clear of them at step 17 of 20; step 18's check
+    that the rows within reach hold every body stopped the run with "add a boundary condition", exit 2, as if the
+    scene were wrong (hunt35_1). After the first step it is the earlier steps' outcome: a failed solve (exit 3)."""
+    from qsc_petsc.errors import ConvergenceError
+    assert isinstance(solver.free_motion_error(1, "upper (translation x)"), SceneError)
+    late = solver.free_motion_error(18, "upper (translation x)")
+    assert isinstance(late, ConvergenceError) and "the earlier steps moved it out of the reach" in str(late)
