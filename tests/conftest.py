@@ -51,6 +51,23 @@ def scene_without_petsc(folder, petsc="", comm=MPI.COMM_WORLD):
     return path
 
 
+def block_and_cube(name, size, cells, upper_cells, rest, lower_modulus=1000.0):
+    """Scene text: a block of `size` and `cells` on z = 0 and a 0.5 m cube of `upper_cells` on it at x, y = 0.25
+    (E 1000, nu 0.3), then `rest` (pairs, dies, boundaries, load), solved by MUMPS."""
+    body = ('[[bodies]]\nname = "{}"\nmesh = {{ type = "box", origin = {}, size = {}, cells = {} }}\n'
+            'material = {{ youngs_modulus = {!r}, poissons_ratio = 0.3 }}\n')
+    return (f'name = "{name}"\n' + body.format("lower", [0.0, 0.0, 0.0], list(size), list(cells), lower_modulus)
+            + body.format("upper", [0.25, 0.25, 0.5], [0.5, 0.5, 0.5], list(upper_cells), 1000.0) + rest
+            + '[petsc]\nksp_type = "preonly"\npc_type = "lu"\npc_factor_mat_solver_type = "mumps"\n')
+
+
+def die(name, point, normal, surfaces, motion=None, condition="frictionless"):
+    """A [[die]] table's text."""
+    return (f'[[die]]\nname = "{name}"\npoint = {list(point)}\nnormal = {list(normal)}\n'
+            + (f"motion = {list(motion)}\n" if motion is not None else "")
+            + f'surfaces = {list(surfaces)}\ncondition = "{condition}"\n'.replace("'", '"'))
+
+
 def all_close(comm, ok):
     """True on every rank iff ok on every rank (assert only on such values under MPI)."""
     return comm.allreduce(bool(ok), op=MPI.LAND)

@@ -4,7 +4,7 @@ as one, and the pressure field where a die and a pair press one surface (a helpe
 import meshio
 import numpy as np
 import pytest
-from conftest import CONFIGS, run_scene, write_gmsh
+from conftest import CONFIGS, block_and_cube, die, run_scene, write_gmsh
 from mpi4py import MPI
 
 from qsc_petsc import fem, solver
@@ -673,58 +673,14 @@ def test_a_body_carried_onto_a_sliding_die_sticks_where_it_meets_it(tmp_path, st
     assert any("met a sticking die within the first 1/64 of the run's first increment" in line for line in logged)
 
 
-CARRIED = """name = "carried"
-[[bodies]]
-name = "lower"
-mesh = { type = "box", origin = [0.0, 0.0, 0.0], size = [2.0, 1.0, 0.5], cells = [10, 5, 3] }
-material = { youngs_modulus = 1e7, poissons_ratio = 0.3 }
-[[bodies]]
-name = "upper"
-mesh = { type = "box", origin = [0.25, 0.25, 0.5], size = [0.5, 0.5, 0.5], cells = [4, 4, 4] }
-material = { youngs_modulus = 1000.0, poissons_ratio = 0.3 }
-[[boundary]]
-surface = "lower.zmin"
-type = "displacement"
-ux = 0.0
-uy = 0.0
-uz = 0.0
-[[boundary]]
-surface = "upper.ymin"
-type = "symmetry"
-[[contact]]
-slave = "upper.zmin"
-master = "lower.zmax"
-formulation = "quasi_symmetric"
-penalty = 1e4
-sliding = "finite"
-[[die]]
-name = "push"
-point = [0.25, 0.0, 0.0]
-normal = [1.0, 0.0, 0.0]
-motion = [1.0, 0.0, 0.0]
-surfaces = ["upper.xmin"]
-condition = "frictionless"
-[[die]]
-name = "front"
-point = [0.75, 0.0, 0.0]
-normal = [-1.0, 0.0, 0.0]
-motion = [0.9975, 0.0, 0.0]
-surfaces = ["upper.xmax"]
-condition = "frictionless"
-[[die]]
-name = "top"
-point = [0.0, 0.0, 1.0]
-normal = [0.0, 0.0, -1.0]
-motion = [0.0, 0.0, -0.005]
-surfaces = ["upper.zmax"]
-condition = "frictionless"
-[load]
-steps = 5
-[petsc]
-ksp_type = "preonly"
-pc_type = "lu"
-pc_factor_mat_solver_type = "mumps"
-"""
+CARRIED = block_and_cube(
+    "carried", [2.0, 1.0, 0.5], [10, 5, 3], [4, 4, 4],
+    '[[boundary]]\nsurface = "lower.zmin"\ntype = "displacement"\nux = 0.0\nuy = 0.0\nuz = 0.0\n[[boundary]]\n'
+    'surface = "upper.ymin"\ntype = "symmetry"\n[[contact]]\nslave = "upper.zmin"\nmaster = "lower.zmax"\n'
+    'formulation = "quasi_symmetric"\n'
+    + die("push", [0.25, 0.0, 0.0], [1.0, 0.0, 0.0], ["upper.xmin"], [1.0, 0.0, 0.0])
+    + die("front", [0.75, 0.0, 0.0], [-1.0, 0.0, 0.0], ["upper.xmax"], [0.9975, 0.0, 0.0])
+    + die("top", [0.0, 0.0, 1.0], [0.0, 0.0, -1.0], ["upper.zmax"], [0.0, 0.0, -0.005]), lower_modulus=1e7)
 
 
 def test_a_die_that_moves_away_keeps_the_nodes_it_holds(tmp_path):

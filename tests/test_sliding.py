@@ -9,7 +9,7 @@ import sys
 
 import numpy as np
 import pytest
-from conftest import CONFIGS, ROOT, run_scene, scene_without_petsc
+from conftest import CONFIGS, ROOT, block_and_cube, die, run_scene, scene_without_petsc
 
 sys.path.insert(0, str(ROOT / "scripts"))
 import bench_contact
@@ -807,40 +807,12 @@ def test_finite_sliding_says_when_its_slip_per_step_grows(tmp_path):
     assert not contact_model._overshooting([0.0, 0.0199, 0.0198, 0.0209, 0.021, 0.027, 0.0295], 0.1)
 
 
-DRAGGED = """name = "dragged"
-[[bodies]]
-name = "lower"
-mesh = { type = "box", origin = [0.0, 0.0, 0.0], size = [3.0, 1.0, 0.5], cells = [24, 8, 4] }
-material = { youngs_modulus = 1000.0, poissons_ratio = 0.3 }
-[[bodies]]
-name = "upper"
-mesh = { type = "box", origin = [0.25, 0.25, 0.5], size = [0.5, 0.5, 0.5], cells = [8, 8, 8] }
-material = { youngs_modulus = 1000.0, poissons_ratio = 0.3 }
-[[contact]]
-slave = "upper.zmin"
-master = "lower.zmax"
-formulation = "quasi_symmetric"
-sliding = "large"
-[[die]]
-name = "bottom"
-point = [0.0, 0.0, 0.0]
-normal = [0.0, 0.0, 1.0]
-surfaces = ["lower.zmin"]
-condition = "sticking"
-[[die]]
-name = "top"
-point = [0.0, 0.0, 1.0]
-normal = [0.0, 0.0, -1.0]
-motion = [0.225, 0.0, -0.00075]
-surfaces = ["upper.zmax"]
-condition = "sticking"
-[load]
-steps = 3
-[petsc]
-ksp_type = "preonly"
-pc_type = "lu"
-pc_factor_mat_solver_type = "mumps"
-"""
+DRAGGED = block_and_cube(
+    "dragged", [3.0, 1.0, 0.5], [24, 8, 4], [8, 8, 8],
+    '[[contact]]\nslave = "upper.zmin"\nmaster = "lower.zmax"\nformulation = "quasi_symmetric"\nsliding = "large"\n'
+    + die("bottom", [0.0, 0.0, 0.0], [0.0, 0.0, 1.0], ["lower.zmin"], condition="sticking")
+    + die("top", [0.0, 0.0, 1.0], [0.0, 0.0, -1.0], ["upper.zmax"], [0.225, 0.0, -0.00075], "sticking")
+    + "[load]\nsteps = 3\n")
 
 
 def test_a_damped_newton_step_is_no_converged_one(tmp_path):
@@ -861,43 +833,13 @@ def test_a_damped_newton_step_is_no_converged_one(tmp_path):
     assert -contact[2] > 0.2 and np.abs(contact + bottom).max() < -1e-8 * contact[2], (contact, bottom)
 
 
-OVERHANG = """name = "overhang"
-[[bodies]]
-name = "lower"
-mesh = { type = "box", origin = [0.0, 0.0, 0.0], size = [1.5, 1.0, 0.5], cells = [12, 8, 4] }
-material = { youngs_modulus = 1000.0, poissons_ratio = 0.3 }
-[[bodies]]
-name = "upper"
-mesh = { type = "box", origin = [0.25, 0.25, 0.5], size = [0.5, 0.5, 0.5], cells = [4, 4, 4] }
-material = { youngs_modulus = 1000.0, poissons_ratio = 0.3 }
-[[contact]]
-slave = "upper.zmin"
-master = "lower.zmax"
-formulation = "quasi_symmetric"
-penalty = 1e4
-sliding = "large"
-enforcement = "augmented_lagrangian"
-[[die]]
-name = "bottom"
-point = [0.0, 0.0, 0.0]
-normal = [0.0, 0.0, 1.0]
-surfaces = ["lower.zmin"]
-condition = "sticking"
-penalty = 1e4
-[[die]]
-name = "top"
-point = [0.0, 0.0, 1.0]
-normal = [0.0, 0.0, -1.0]
-motion = [1.0, 0.0, -0.005]
-surfaces = ["upper.zmax"]
-condition = "sticking"
-[load]
-steps = 5
-[petsc]
-ksp_type = "preonly"
-pc_type = "lu"
-pc_factor_mat_solver_type = "mumps"
-"""
+OVERHANG = block_and_cube(
+    "overhang", [1.5, 1.0, 0.5], [12, 8, 4], [4, 4, 4],
+    '[[contact]]\nslave = "upper.zmin"\nmaster = "lower.zmax"\nformulation = "quasi_symmetric"\nsliding = "large"\n'
+    'enforcement = "augmented_lagrangian"\n'
+    + die("bottom", [0.0, 0.0, 0.0], [0.0, 0.0, 1.0], ["lower.zmin"], condition="sticking")
+    + die("top", [0.0, 0.0, 1.0], [0.0, 0.0, -1.0], ["upper.zmax"], [1.0, 0.0, -0.005], "sticking")
+    + "[load]\nsteps = 5\n")
 
 
 def test_augmented_rows_left_to_the_penalty_are_said(tmp_path):

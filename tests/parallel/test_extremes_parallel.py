@@ -88,11 +88,10 @@ def test_unheld_bodies_stop_every_rank(comm, mpi_tmp, name, error, text):
     assert res["status"] == error and text in res["message"]
 
 
-def _floating_stack():
-    """Four blocks 0.01 m apart, the lowest on rollers, a frictionless die on the top one moving down 0.04 m in 3
-    steps: at step 1 the upper three float, held by nothing that carries force."""
-    cells = ([3, 3, 2], [5, 5, 2], [4, 4, 3], [7, 7, 2])
-    text = 'name = "floating_stack"\n'
+def _stack(name, cells, pair="", ends=""):
+    """Blocks 1 x 1 x 0.5 m, 0.01 m apart, each on rollers (xmin, ymin), a quasi_symmetric pair (with `pair`'s keys)
+    between each and the one below, then `ends` (what holds and moves the stack)."""
+    text = f'name = "{name}"\n'
     for b, n in enumerate(cells):
         text += (f'[[bodies]]\nname = "b{b}"\nmesh = {{ type = "box", origin = [0.0, 0.0, {0.51 * b:.2f}], size = '
                  f'[1.0, 1.0, 0.5], cells = {n} }}\nmaterial = {{ youngs_modulus = 1000.0, poissons_ratio = 0.3 }}\n'
@@ -100,11 +99,33 @@ def _floating_stack():
                  f'[[boundary]]\nsurface = "b{b}.ymin"\ntype = "symmetry"\n')
         if b:
             text += (f'[[contact]]\nslave = "b{b}.zmin"\nmaster = "b{b - 1}.zmax"\n'
-                     f'formulation = "quasi_symmetric"\n')
-    return text + ('[[boundary]]\nsurface = "b0.zmin"\ntype = "displacement"\nuz = 0.0\n[[die]]\nname = "top"\n'
-                   f'point = [0.0, 0.0, {1.53 + 0.5!r}]\nnormal = [0.0, 0.0, -1.0]\nmotion = [0.0, 0.0, -0.04]\n'
-                   'surfaces = ["b3.zmax"]\ncondition = "frictionless"\n[load]\nsteps = 3\n[petsc]\n'
-                   'ksp_type = "preonly"\npc_type = "lu"\npc_factor_mat_solver_type = "mumps"\n')
+                     f'formulation = "quasi_symmetric"\n{pair}')
+    return text + ends
+
+
+MUMPS = '[petsc]\nksp_type = "preonly"\npc_type = "lu"\npc_factor_mat_solver_type = "mumps"\n'
+
+
+def _top_die(z, motion):
+    return (f'[[die]]\nname = "top"\npoint = [0.0, 0.0, {z!r}]\nnormal = [0.0, 0.0, -1.0]\nmotion = [0.0, 0.0, '
+            f'{motion!r}]\nsurfaces = ["b{round((z - 0.5) / 0.51)}.zmax"]\ncondition = "frictionless"\n')
+
+
+def _floating_stack():
+    """Four blocks 0.01 m apart, the lowest on rollers, a frictionless die on the top one moving down 0.04 m in 3
+    steps: at step 1 the upper three float, held by nothing that carries force."""
+    return _stack("floating_stack", ([3, 3, 2], [5, 5, 2], [4, 4, 3], [7, 7, 2]),
+                  ends='[[boundary]]\nsurface = "b0.zmin"\ntype = "displacement"\nuz = 0.0\n' + _top_die(2.03, -0.04)
+                  + "[load]\nsteps = 3\n" + MUMPS)
+
+
+def _run_text(comm, folder, text, overrides=(), log=None, out="out"):
+    """Run the scene `text` (written by rank 0 into the shared folder) on every rank: (run, summary)."""
+    path = folder / "scene.toml"
+    if comm.rank == 0:
+        path.write_text(text)
+    comm.Barrier()
+    return run_scene(path, folder / out, overrides, comm=comm, log=log)
 
 
 def test_a_floating_stack_is_one_answer_of_many_on_any_number_of_ranks(comm, mpi_tmp):
@@ -114,11 +135,7 @@ def test_a_floating_stack_is_one_answer_of_many_on_any_number_of_ranks(comm, mpi
     now fails only where the residual loads the free motion (tests/test_extremes.py's pulled bodies): on any
     number of ranks the run ends ok, says the loose bodies, and once the die has closed every gap each interface
     carries the die's force."""
-    path = mpi_tmp / "stack.toml"
-    if comm.rank == 0:
-        path.write_text(_floating_stack())
-    comm.Barrier()
-    run, summary = run_scene(path, mpi_tmp / "out", comm=comm)
+    run, summary = _run_text(comm, mpi_tmp, _floating_stack())
     run.destroy()
     assert summary["status"] == "ok"
     assert "b3 (translation z)" in summary["steps"][0]["loose"]
@@ -144,29 +161,16 @@ def test_a_strain_at_the_threshold_is_said_at_the_same_step_on_any_number_of_ran
 
 def _gapped_blocks():
     """Three blocks 0.01 m apart on rollers between frictionless dies, the top die moving just to touch (hunt35_2)."""
-    text = 'name = "gapped"\n'
-    for b, (z, n) in enumerate(((0.0, 3), (0.51, 4), (1.02, 3))):
-        text += (f'[[bodies]]\nname = "b{b}"\nmesh = {{ type = "box", origin = [0.0, 0.0, {z}], size = [1.0, 1.0, '
-                 f'0.5], cells = [{n}, {n}, 2] }}\nmaterial = {{ youngs_modulus = 1000.0 }}\n')
-        text += "".join(f'[[boundary]]\nsurface = "b{b}.{side}"\ntype = "symmetry"\n' for side in ("xmin", "ymin"))
-        if b:
-            text += (f'[[contact]]\nslave = "b{b}.zmin"\nmaster = "b{b - 1}.zmax"\nformulation = "quasi_symmetric"\n'
-                     'search_distance = 2.0\n')
-    return text + ('[[die]]\nname = "bottom"\npoint = [0.0, 0.0, 0.0]\nnormal = [0.0, 0.0, 1.0]\nsurfaces = '
-                   '["b0.zmin"]\n[[die]]\nname = "top"\npoint = [0.0, 0.0, 1.52]\nnormal = [0.0, 0.0, -1.0]\n'
-                   'motion = [0.0, 0.0, -0.01]\nsurfaces = ["b2.zmax"]\n[petsc]\nksp_type = "preonly"\npc_type = '
-                   '"lu"\npc_factor_mat_solver_type = "mumps"\n')
+    return _stack("gapped", ([3, 3, 2], [4, 4, 2], [3, 3, 2]), pair="search_distance = 2.0\n",
+                  ends='[[die]]\nname = "bottom"\npoint = [0.0, 0.0, 0.0]\nnormal = [0.0, 0.0, 1.0]\nsurfaces = '
+                  '["b0.zmin"]\n' + _top_die(1.52, -0.01) + MUMPS)
 
 
 def test_blocks_held_by_no_row_are_named_loose_on_any_number_of_ranks(comm, mpi_tmp):
     """Three blocks between gaps the top die only closes: on 2 ranks the step ended "ok" with every row open, the
     blocks wherever a singular factorization put them, and no word, while 1 and 3 ranks ended touching and said
     them loose (hunt35_2). Bodies held by no row at all are loose too."""
-    path = mpi_tmp / "gapped.toml"
-    if comm.rank == 0:
-        path.write_text(_gapped_blocks())
-    comm.Barrier()
-    run, summary = run_scene(path, mpi_tmp / "out", comm=comm)
+    run, summary = _run_text(comm, mpi_tmp, _gapped_blocks())
     run.destroy()
     assert summary["status"] == "ok"
     assert summary["steps"][0]["loose"] == "b0 (translation z); b1 (translation z); b2 (translation z)"
@@ -177,12 +181,9 @@ def test_pairs_that_carry_no_load_have_no_soft_penalty(comm, mpi_tmp):
     depths were the solve's round-off (1e-15 to 8e-14 m) were said to have a soft penalty, contact[0] on 1 rank,
     contact[1] and [2] on 2 (hunt35_2), or their rows not to hold them (the depths 1e5 times the pressure's p / eps_n).
     Pairs with a pressure below a strain of 1e-8, where the run's round-off warning reads loads, say neither."""
-    path = mpi_tmp / "stack.toml"
-    if comm.rank == 0:
-        path.write_text(_floating_stack().split("[petsc]")[0])
-    comm.Barrier()
+    text = _floating_stack().split("[petsc]")[0]
     lines = []
-    run, summary = run_scene(path, mpi_tmp / "out", comm=comm, log=lines.append)
+    run, summary = _run_text(comm, mpi_tmp, text, log=lines.append)
     run.destroy()
     assert summary["status"] == "ok"
     said = [line for line in comm.bcast(lines, root=0) if "is soft for this load" in line or "no penalty explains" in line]
@@ -196,18 +197,15 @@ def test_blocks_between_open_gaps_under_the_iterative_solver_are_not_said_to_hav
     naming them loose, or says its linear solve could not take the singular Jacobian and that a direct solver does
     (which then ends ok)."""
     from qsc_petsc.errors import ConvergenceError
-    path = mpi_tmp / "gapped.toml"
-    if comm.rank == 0:
-        path.write_text(_gapped_blocks().split("[petsc]")[0])
-    comm.Barrier()
+    text = _gapped_blocks().split("[petsc]")[0]
     try:
-        run, summary = run_scene(path, mpi_tmp / "out", comm=comm)
+        run, summary = _run_text(comm, mpi_tmp, text)
         run.destroy()
         loose = summary["steps"][0]["loose"]         # b0 too, unless the iterations left it on its die (3 ranks)
         assert "b1 (translation z); b2 (translation z)" in loose, loose
     except ConvergenceError as exc:
         assert "no equilibrium" not in str(exc) and "a direct solver does (-qsc_ksp_type preonly" in str(exc), exc
-    run, summary = run_scene(path, mpi_tmp / "direct", ["petsc.ksp_type=\"preonly\"", "petsc.pc_type=\"lu\"",
-                                                         "petsc.pc_factor_mat_solver_type=\"mumps\""], comm=comm)
+    run, summary = _run_text(comm, mpi_tmp, text, ['petsc.ksp_type="preonly"', 'petsc.pc_type="lu"',
+                                                   'petsc.pc_factor_mat_solver_type="mumps"'], out="direct")
     run.destroy()
     assert summary["status"] == "ok"
