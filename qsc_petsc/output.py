@@ -58,7 +58,8 @@ def clear_results(directory):
     stale += [p for suffix in (".tmp", ASIDE) for p in directory.glob("*" + suffix)
               if p.name[:-len(suffix)] in names]
     if steps.is_dir():
-        stale += [p for pattern in ("step_*.xdmf", "step_*.xdmf.tmp", "step_*.xdmf" + ASIDE) for p in steps.glob(pattern)]
+        stale += [p for pattern in ("step_*.xdmf", "step_*.xdmf.tmp", "step_*.xdmf" + ASIDE)
+                  for p in steps.glob(pattern)]
     stale = [path for path in stale if path.is_file()]
     # all or nothing: a steps/ folder this process may not change lost the earlier run's other results first, and
     # the run then stopped with no summary (hunt33_2)

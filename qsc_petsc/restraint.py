@@ -146,13 +146,13 @@ class Restraint:
         return self.seen[term]
 
     def loose(self, terms, u=None):
-        """The motions that no boundary and no active row carrying force holds (a row's pressure at most
-        LOOSE_SHARE of the largest row pressure of all terms, or of the term's pressure_floor, that of a strain of
-        FLOOR_STRAIN, if that is larger, carries none): {body name: [mode names]}, empty if the boundary conditions and the rows that press hold
-        every body (collective). Such a body sits where the Newton iterations left it: any position along those
-        motions that keeps its rows open is an equilibrium too. Without the floor, when every force was round-off
-        (a stack not loaded yet, 3e-15 N at most) round-off rows counted as pressing and only some of the loose
-        bodies were named. The floor was the Newton test's force floor (N) until session 34, against pressures
+        """The motions that no boundary and no active row carrying force holds (a row's pressure at most LOOSE_SHARE of
+        the largest row pressure of all terms, or of the term's pressure_floor, that of a strain of FLOOR_STRAIN, if
+        that is larger, carries none): {body name: [mode names]}, empty if the boundary conditions and the rows that
+        press hold every body (collective). Such a body sits where the Newton iterations left it: any position along
+        those motions that keeps its rows open is an equilibrium too. Without the floor, when every force was
+        round-off (a stack not loaded yet, 3e-15 N at most) round-off rows counted as pressing and only some of the
+        loose bodies were named. The floor was the Newton test's force floor (N) until session 34, against pressures
         (Pa): 100 km blocks pressed to a strain of 1e-5 were said loose, all 64 rows carrying the load (hunt34_1)."""
         forces = [np.abs(term.m.getArray()[term.rows]) for term in terms]
         largest = self.comm.allreduce(max((float(f.max(initial=0.0)) for f in forces), default=0.0), op=MPI.MAX)

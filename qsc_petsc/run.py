@@ -506,9 +506,10 @@ class Run:
                             record["loose"] = loose
                         if loose and loose != last_loose:
                             self.log(f"step {step}: warning: {loose}: held there by no boundary and only by "
-                                     f"contact rows that carry no force, if any, so the scene does not set its position along that motion (this "
-                                     f"answer is one of many); hold it with a boundary condition, or a die or "
-                                     f"contact within reach that presses on it (summary: loose)")
+                                     f"contact rows that carry no force, if any, so the scene does not set its "
+                                     f"position along that motion (this answer is one of many); hold it with a "
+                                     f"boundary condition, or a die or contact within reach that presses on it "
+                                     f"(summary: loose)")
                         last_loose = loose
                     line = self._round_off_line(u, ul, t, record.get("contact", {}))
                     if line and not coarse:

@@ -411,8 +411,9 @@ def _set_up_model(comm, contact_preconditioner):
 
 def _options_at_fault(comm, contact_preconditioner):
     """The -qsc_ options without which the model's set-up passes, one left out at a time (collective: every
-    rank holds the same database), as "-name value". A factorization package reads its options (-qsc_mat_mumps_icntl_7 99) only
-    when it factors, and its message names neither the option nor always the value."""
+    rank holds the same database), as "-name value". A factorization package reads its options
+    (-qsc_mat_mumps_icntl_7 99) only when it factors, and its message names neither the option nor always the
+    value."""
     database = PETSc.Options()
     at_fault = []
     for name, value in options.options_in_effect().items():
