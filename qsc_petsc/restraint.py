@@ -162,6 +162,13 @@ class Restraint:
             # ... nor one whose force is its own round-off (ConstraintTerm.round_off): rows whose gap closed to
             # round-off held the bodies of a floating stack, of which only the top one was named (hunt32_1)
             pressing = [p & (f > LOOSE_ROUND_OFF * term.round_off(u)) for p, f, term in zip(pressing, forces, terms)]
+        for term, held in zip(terms, pressing):
+            if term.gate_of is not None:
+                # a sticking die's tangential row holds its node wherever the node's normal row presses, with force
+                # or none: blocks of nu = 0 between sticking dies, whose tangential rows carry nothing, were said
+                # loose, "one of many", though held (hunt35_4)
+                tangential = np.flatnonzero(term.gate_of >= 0)
+                held[tangential] = term.active[tangential] & held[term.gate_of[tangential]]
         # every active row may carry force and a body still be free: a solve converges with a body held by no row
         # when the residual does not load it (free_load); three blocks between open gaps ended "ok" with no word on
         # 2 ranks, every row open (hunt35_2)

@@ -707,3 +707,22 @@ def test_a_body_the_earlier_steps_left_free_is_a_failed_solve_not_bad_input():
     assert isinstance(solver.free_motion_error(1, "upper (translation x)"), SceneError)
     late = solver.free_motion_error(18, "upper (translation x)")
     assert isinstance(late, ConvergenceError) and "the earlier steps moved it out of the reach" in str(late)
+
+
+def test_bodies_sticking_dies_hold_without_tangential_force_are_not_loose(tmp_path):
+    """A block and a plate of nu = 0 between two sticking dies: the dies' tangential rows carry no force (no Poisson
+    expansion to hold), and the bodies were said loose, "one of many", though the dies hold them where they are
+    (hunt35_4; the uniaxial answer to 1e-11). A tangential row holds wherever its normal row presses."""
+    body = ('[[bodies]]\nname = "{}"\nmesh = {{ type = "box", origin = [0.0, 0.0, {}], size = [1.0, 1.0, {}], '
+            'cells = {} }}\nmaterial = {{ youngs_modulus = 1000.0, poissons_ratio = 0.0 }}\n')
+    path = tmp_path / "sandwich.toml"
+    path.write_text('name = "sandwich"\n' + body.format("block", 0.0, 0.5, [4, 4, 3])
+                    + body.format("plate", 0.5, 0.02, [10, 10, 1])
+                    + die("bottom", [0.0, 0.0, 0.0], [0.0, 0.0, 1.0], ["block.zmin"], condition="sticking")
+                    + die("top", [0.0, 0.0, 0.52], [0.0, 0.0, -1.0], ["plate.zmax"], [0.0, 0.0, -0.0052], "sticking")
+                    + '[[contact]]\nslave = "plate.zmin"\nmaster = "block.zmax"\n')
+    lines = []
+    run, summary = run_scene(path, tmp_path / "out", log=lines.append)
+    run.destroy()
+    assert summary["status"] == "ok" and "loose" not in summary["steps"][-1], lines
+    assert not [line for line in lines if "warning" in line], lines
