@@ -1359,7 +1359,15 @@ class ContactModel:
                 cure += ":"
             cure += " use two_pass or integration = \"segment\""
         else:
-            cure = "refine the coarser surface, or use two_pass with integration = \"segment\""
+            # not the run's own settings: a faceted ring's two_pass segment run was told to use two_pass with segment
+            # rows, while feature_angle, which held it, went unnamed (hunt35_4)
+            cures = ["refine the coarser surface (a curved one's facets)"]
+            if spec.feature_angle is None:
+                cures.append("give the pair a feature_angle below the fold between its facets (their edges' and "
+                             "corners' own nodal rows)")
+            if spec.formulation != "two_pass" or spec.integration != "segment":
+                cures.append("use two_pass with integration = \"segment\"")
+            cure = ", or ".join(cures)
         return (f"{name}: pressed nodes penetrate the other surface by up to {deepest:.3g} m = "
                 f"{deepest / pd['h_eff']:.2g} h_eff, {deepest / expected:.2g} times the penetration of the mean "
                 f"contact pressure (p / eps_n = {expected:.3g} m): no penalty explains that, so the rows do not hold "
