@@ -224,6 +224,17 @@ def _plane_frames(type_s, xs):
     return centre, n, e1, cross(n, e1)
 
 
+def not_convex(type_s, xs):
+    """Whether each face xs (m, n, 3) is not strictly convex in its own plane (a reflex or straight corner, or a
+    degenerate face): segment rows cannot clip it (segment_quadrature)."""
+    if len(xs) == 0:
+        return np.zeros(0, dtype=bool)
+    centre, _, e1, e2 = _plane_frames(type_s, xs)
+    r = xs - centre[:, None, :]
+    p = np.stack([np.einsum("mvi,mi->mv", r, e1), np.einsum("mvi,mi->mv", r, e2)], axis=-1)
+    return ~(_corner_turns(p) > 0.0).all(axis=1)
+
+
 def _empty_result():
     return {"pair": np.zeros(0, dtype=np.int64), "x": np.zeros((0, 3)), "xi_s": np.zeros((0, 2)),
             "xi_t": np.zeros((0, 2)), "weight": np.zeros(0)}
