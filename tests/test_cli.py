@@ -532,6 +532,8 @@ def test_failed_load_step_exits_3_and_keeps_earlier_steps(tmp_path, ranks):
     assert "Traceback" not in out
     assert lines[-1].startswith("qsc: solve failed: load step 2 "), out
     assert "SNES DIVERGED_MAX_IT" in lines[-1], out
+    # the limit named, as the user set it (a 1/500 plate converged with it raised, unnamed; hunt35_4)
+    assert lines[-1].endswith(f"had not settled within {newton[0]}: raise -qsc_snes_max_it, or use more load steps"), out
     assert any(line.startswith("step 1/2: ") for line in lines), out
     assert sum("cutting the increment in half" in line for line in lines) == 1, out    # max_cutbacks = 1
     summary = _summary(tmp_path / "out")
