@@ -227,7 +227,11 @@ class Run:
         options.check_options()
         # the solver set up on a model matrix, as `qsc check` does: an option a factorization package refuses
         # (-qsc_mat_mumps_icntl_7 99) is an input error before the folder is touched, not a failed solve
-        check_solver_options(comm, scene.solver.contact_preconditioner if scene.contact else None)
+        # (the band's part not where SuperLU_DIST factors it: a second band set-up in one process freed a
+        # communicator twice at PetscFinalize, "corrupted double-linked list" and exit 134 after an "ok" run;
+        # PETSc 3.18, hunt35_3)
+        band = options.option_value("band_pc_factor_mat_solver_type") != "superlu_dist"
+        check_solver_options(comm, scene.solver.contact_preconditioner if scene.contact and band else None)
         with self.phases("mesh"):
             self.mesh = distribute_mesh(scene, comm)
             check_cells(self.mesh, scene)

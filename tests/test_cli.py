@@ -882,6 +882,18 @@ def test_bad_band_option_ends_every_rank_with_exit_2(tmp_path, case):
         assert len(errors) == 1 and errors[0].startswith(expected) and quoted in errors[0], out
 
 
+@pytest.mark.skipif(MPIRUN is None, reason="mpirun not found")
+def test_a_band_on_superlu_dist_ends_cleanly(tmp_path):
+    """The band factored by SuperLU_DIST on 2 ranks: with the run's model-matrix set-up (session 35) a second band
+    set-up in one process freed a communicator twice at PetscFinalize, "corrupted double-linked list" and exit 134
+    after the run said "done" (hunt35_3). The run leaves that band out of its model set-up."""
+    serial_only()
+    code, out = run_qsc(["run", CONFIGS / "two_cubes_dies.toml", "--out", tmp_path / "out", "-qsc_ksp_type", "gmres",
+                         "-qsc_pc_type", "hypre", "-qsc_band_pc_type", "lu", "-qsc_band_pc_factor_mat_solver_type",
+                         "superlu_dist"], 2, tmp_path, 120.0)
+    assert code == 0 and "corrupted" not in out, out
+
+
 def test_petsc_detail_quotes_the_innermost_routine_and_its_specifics():
     """errors.petsc_detail reads petsc4py's error text: the deepest routine and the lines after PETSc's generic one."""
     from qsc_petsc.errors import petsc_detail
