@@ -765,9 +765,10 @@ def test_a_viewer_option_with_a_bad_value_is_an_input_error(tmp_path, option, ho
     """Viewer options given a value they do not take, or a file that cannot be opened, ended in a traceback per
     rank and MPI_Abort (exit 1), or, read at the solve's end, in a failed solve (exit 3; helper pass, session 25):
     exit 2 with one line naming the option. In a scene, `ksp_monitor = true` is the flag itself."""
+    # in tmp_path: a viewer's file named relative (monitor.txt) is made where the run starts
     proc = subprocess.run([sys.executable, "-m", "qsc_petsc.cli", "run", str(CONFIGS / "patch_test.toml"),
                            "--out", str(tmp_path / "out"), *option], capture_output=True, text=True, timeout=120,
-                          check=False)
+                          check=False, cwd=tmp_path)
     assert proc.returncode == 2, proc.stdout + proc.stderr
     last = proc.stdout.splitlines()[-1]
     assert last.startswith("qsc: error: PETSc options") and f"{holder}" in last and f"in {option[0]} (" in last, last
