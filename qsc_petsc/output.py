@@ -79,7 +79,8 @@ def clear_results(directory):
             if path not in stale:
                 path.rename(path.with_name(path.name[:-len(ASIDE)]))
         raise
-    for path in aside:
+    # a leftover twin (X.cleared beside X) was replaced by X's rename and is listed twice: once each
+    for path in dict.fromkeys(aside):
         path.unlink()
 
 
