@@ -91,11 +91,11 @@ def _end_interrupted(line="qsc: interrupted"):
     os._exit(130)
 
 
-def _say(*args):
-    """print on rank 0, each line as it comes (a pipe or a file sees the run's progress); once stdout's reader
-    has gone, the rest goes to /dev/null and the run goes on: its results are its files."""
+def say_line(*args, **kwargs):
+    """print, each line as it comes (a pipe or a file sees the run's progress); once stdout's reader has gone,
+    the rest goes to /dev/null and the run (or sweep) goes on: its results are its files."""
     try:
-        print(*args, flush=True)
+        print(*args, **{**kwargs, "flush": True})
     except BrokenPipeError:
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())
@@ -120,9 +120,9 @@ def main(argv=None):
     # the others waited for it in a collective call, and its exit's clean-up waited too, for ever
     signal.signal(signal.SIGTERM, _interrupt)
     # a reader that leaves (`qsc run ... | head`): PETSc's handler aborted the run at the next line (exit 59, the
-    # summary left "running"; hunt34_3). Ignored, a write fails instead, and _say sends the rest nowhere
+    # summary left "running"; hunt34_3). Ignored, a write fails instead, and say_line sends the rest nowhere
     signal.signal(signal.SIGPIPE, signal.SIG_IGN)
-    say = _say if comm.rank == 0 else (lambda *a, **k: None)
+    say = say_line if comm.rank == 0 else (lambda *a, **k: None)
     if args.version:
         say(versions())
         return 0

@@ -655,22 +655,25 @@ def sweep(plan, say=print, reference=None):
 
 
 def main(argv):
-    """The `qsc sweep` command; returns the exit code (0, 2 bad arguments, 3 the reference run failed)."""
+    """The `qsc sweep` command; returns the exit code (0, 2 bad arguments, 3 the reference run failed). Its lines
+    go through cli.say_line: `qsc sweep ... | head -1` ended in a BrokenPipeError traceback after the reference
+    run, with no sweep.csv (hunt35_3)."""
+    from .cli import say_line as say
     try:
         plan = make_plan(argv)
         prepare_out(plan)
     except QscError as exc:
-        print(f"qsc sweep: error: {exc}")
+        say(f"qsc sweep: error: {exc}")
         return EXIT_INPUT
     try:
-        rows = sweep(plan)
+        rows = sweep(plan, say=say)
     except KeyboardInterrupt:
         table = plan.out / "sweep.csv"
-        print(f"qsc sweep: interrupted; the runs done are in {table}" if table.is_file() else
+        say(f"qsc sweep: interrupted; the runs done are in {table}" if table.is_file() else
               f"qsc sweep: interrupted before any run was done (the reference's folder: {plan.out / 'reference'})")
         return EXIT_INTERRUPTED
     if rows[0]["status"] != "ok":
-        print(f"qsc sweep: the reference run did not succeed ({rows[0]['status']}: {rows[0]['message']}); "
+        say(f"qsc sweep: the reference run did not succeed ({rows[0]['status']}: {rows[0]['message']}); "
               "no errors were computed")
         return EXIT_REFERENCE
     return EXIT_OK

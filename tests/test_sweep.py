@@ -274,3 +274,25 @@ def test_a_sweep_under_mpirun_says_why_its_runs_fail():
     assert _last_error_line("", banner).startswith("mpirun does not support recursive calls: run qsc sweep without")
     assert _last_error_line("", "[0] Unable to find requested PC type x\n" + "*" * 10 + "\n") == \
         "Unable to find requested PC type x"
+
+
+def test_a_reader_that_leaves_does_not_end_the_sweep(tmp_path):
+    """`qsc sweep ... | head -1`: a BrokenPipeError traceback after the reference run, exit 1, no sweep.csv
+    (hunt35_3). The rest of the lines go nowhere and the sweep writes its table."""
+    import subprocess
+    import sys
+    # without this process's singleton MPI variables, which stop a child's mpirun at once (as above)
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("OMPI_MCA_", "PMIX_", "OMPI_COMM", "OMPI_FIRST",
+                                                                      "OMPI_FILE", "OMPI_NUM", "OMPI_UNIVERSE"))}
+    proc = subprocess.Popen([sys.executable, "-m", "qsc_petsc.cli", "sweep", SCENE, *TINY, "--vary",
+                             "contact.0.formulation=master_slave,two_pass", "--out", str(tmp_path / "sw")],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    try:
+        first = proc.stdout.readline()
+        proc.stdout.close()
+        _, err = proc.communicate(timeout=300)
+    finally:
+        proc.kill()
+    assert first.startswith("qsc sweep: patch_test: 2 combination(s)"), first
+    assert proc.returncode == 0 and "Traceback" not in err, err
+    assert (tmp_path / "sw" / "sweep.csv").is_file()
